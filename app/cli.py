@@ -1,0 +1,97 @@
+"""Command line: ``hydrobuckle run|validate|version``.
+
+Exit codes: 0 success, 1 solver failure (summary.json says "failed", history kept),
+2 bad input (one line naming the key and the allowed range; no result directory is created).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from app import config
+
+EXIT_OK, EXIT_SOLVER, EXIT_INPUT = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse's own usage errors also exit 2, with one line
+        self.print_usage(sys.stderr)
+        print(f"hydrobuckle: error: {message}", file=sys.stderr)
+        raise SystemExit(EXIT_INPUT)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="hydrobuckle", description="Swelling-induced wrinkling of constrained hydrogels.")
+    sub = p.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run a simulation from a TOML config")
+    run.add_argument("config", help="TOML config file (keys: see README)")
+    run.add_argument("-o", "--output", help="result directory (default results/<config name>)")
+    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                     help="override a config key, e.g. --set material.film.modulus_ratio=20")
+    run.add_argument("-q", "--quiet", action="store_true", help="no per-step progress lines")
+    val = sub.add_parser("validate", help="check a config and print it fully resolved")
+    val.add_argument("config")
+    val.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    sub.add_parser("version", help="print hydrobuckle, dolfinx, PETSc, SLEPc and gmsh versions")
+    return p
+
+
+def _comm():
+    from mpi4py import MPI
+
+    return MPI.COMM_WORLD
+
+
+def _input_error(comm, err: Exception) -> int:
+    if comm is None or comm.rank == 0:
+        print(f"hydrobuckle: error: {err}", file=sys.stderr)
+    return EXIT_INPUT
+
+
+def cmd_validate(args) -> int:
+    try:
+        cfg = config.load(args.config, args.set)
+    except config.ConfigError as err:
+        return _input_error(None, err)
+    print(config.dumps(cfg))
+    return EXIT_OK
+
+
+def cmd_version(args) -> int:
+    from app.output import versions
+
+    for k, v in versions().items():
+        print(f"{k} {v}")
+    return EXIT_OK
+
+
+def cmd_run(args) -> int:
+    comm = _comm()
+    try:
+        cfg = config.load(args.config, args.set)
+    except config.ConfigError as err:
+        return _input_error(comm, err)
+    import logging
+
+    from app import logging_setup
+
+    logging_setup.setup(comm, logging.WARNING if args.quiet else logging.INFO)
+    outdir = Path(args.output) if args.output else Path("results") / Path(args.config).stem
+    from app.run import simulate
+
+    summary = simulate(cfg, outdir, comm)
+    return EXIT_OK if summary["status"] != "failed" else EXIT_SOLVER
+
+
+COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    return COMMANDS[args.command](args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,200 @@
+"""Every dolfinx-0.5-specific call hydrobuckle makes, in one place.
+
+A port to a newer dolfinx (element constructors from basix.ufl, ``functionspace``,
+``gmshio.model_to_mesh`` returning a named tuple, ``x.petsc_vec`` instead of ``vector``)
+should only need to touch this module.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import ufl
+from dolfinx import fem, mesh as dmesh
+from dolfinx.fem import petsc as fem_petsc
+from dolfinx.io import XDMFFile, gmshio  # gmshio must be imported explicitly in 0.5
+from petsc4py import PETSc
+
+import dolfinx
+
+DOLFINX_VERSION = dolfinx.__version__
+ScalarType = PETSc.ScalarType
+
+# --- function spaces -------------------------------------------------------------------
+
+
+def mixed_displacement_flux_space(domain):
+    """Vector Q1 displacement x RTCF1 flux (lowest-order Raviart-Thomas on quadrilaterals)."""
+    cell = domain.ufl_cell()
+    u_el = ufl.VectorElement("Lagrange", cell, 1)
+    h_el = ufl.FiniteElement("RTCF", cell, 1)
+    return fem.FunctionSpace(domain, ufl.MixedElement([u_el, h_el]))
+
+
+def scalar_space(domain, family: str, degree: int):
+    return fem.FunctionSpace(domain, (family, degree))
+
+
+def vector_space(domain, family: str, degree: int):
+    return fem.VectorFunctionSpace(domain, (family, degree))
+
+
+def rtcf_space(domain):
+    return fem.FunctionSpace(domain, ufl.FiniteElement("RTCF", domain.ufl_cell(), 1))
+
+
+def collapse(subspace):
+    """(collapsed space, indices of its dofs in the parent's local array)."""
+    V, dofs = subspace.collapse()
+    return V, np.asarray(dofs, dtype=np.int32)
+
+
+def function_vector(f: fem.Function) -> PETSc.Vec:
+    """The PETSc vector that shares memory with ``f.x.array``."""
+    return f.vector
+
+
+def scatter_forward(f: fem.Function) -> None:
+    f.x.scatter_forward()
+
+
+def owned_size(V) -> int:
+    """Number of locally owned scalar dofs of V (block size included)."""
+    return V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+
+
+def global_size(V) -> int:
+    return V.dofmap.index_map.size_global * V.dofmap.index_map_bs
+
+
+# --- mesh ----------------------------------------------------------------------------
+
+
+def gmsh_model_to_mesh(model, comm, rank: int = 0, gdim: int = 2):
+    """(mesh, cell_tags, facet_tags) from a gmsh model that lives on ``rank``."""
+    return gmshio.model_to_mesh(model, comm, rank, gdim=gdim)
+
+
+def num_owned_cells(domain) -> int:
+    tdim = domain.topology.dim
+    return domain.topology.index_map(tdim).size_local
+
+
+def num_global_cells(domain) -> int:
+    return domain.topology.index_map(domain.topology.dim).size_global
+
+
+def rectangle_quads(comm, p0, p1, n):
+    return dmesh.create_rectangle(comm, [np.asarray(p0, float), np.asarray(p1, float)], n,
+                                  cell_type=dmesh.CellType.quadrilateral)
+
+
+def facets_with_tag(facet_tags, tag: int) -> np.ndarray:
+    return facet_tags.indices[facet_tags.values == tag]
+
+
+def cells_with_tag(cell_tags, tag: int) -> np.ndarray:
+    return cell_tags.indices[cell_tags.values == tag]
+
+
+def make_meshtags(domain, dim: int, indices, values):
+    indices = np.asarray(indices, dtype=np.int32)
+    values = np.asarray(values, dtype=np.int32)
+    order = np.argsort(indices)
+    return dmesh.meshtags(domain, dim, indices[order], values[order])
+
+
+# --- forms, assembly, boundary conditions ----------------------------------------------
+
+form = fem.form
+Function = fem.Function
+Constant = fem.Constant
+
+
+def dirichlet_zero_on_facets(W_sub, facets: np.ndarray, fdim: int):
+    """Homogeneous Dirichlet condition on a (possibly nested) sub-space of a mixed space.
+
+    Works for Lagrange components and for RT flux spaces (where it fixes the normal flux
+    moments on the given facets to zero)."""
+    V, _ = W_sub.collapse()
+    g = fem.Function(V)
+    g.x.array[:] = 0.0
+    dofs = fem.locate_dofs_topological((W_sub, V), fdim, facets)
+    return fem.dirichletbc(g, dofs, W_sub), g
+
+
+def dirichlet_function_on_facets(W_sub, facets: np.ndarray, fdim: int):
+    """Dirichlet condition whose values come from a Function the caller updates in time."""
+    return dirichlet_zero_on_facets(W_sub, facets, fdim)
+
+
+def bc_dof_indices(bc) -> np.ndarray:
+    """Local (owned + ghost) indices in the parent space constrained by ``bc``."""
+    idx, first_ghost = bc.dof_indices()
+    return np.asarray(idx, dtype=np.int32)
+
+
+def create_matrix(a):
+    return fem_petsc.create_matrix(a)
+
+
+def create_vector(L):
+    return fem_petsc.create_vector(L)
+
+
+def assemble_matrix_into(A, a, bcs, diagonal: float = 1.0):
+    A.zeroEntries()
+    fem_petsc.assemble_matrix(A, a, bcs=bcs, diagonal=diagonal)
+    A.assemble()
+
+
+def assemble_residual_into(b, L, a, bcs, x):
+    """b = L(x) with Dirichlet rows set to (x_bc - x) * -1, the standard Newton lifting."""
+    with b.localForm() as b_local:
+        b_local.set(0.0)
+    fem_petsc.assemble_vector(b, L)
+    fem_petsc.apply_lifting(b, [a], bcs=[bcs], x0=[x], scale=-1.0)
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    fem_petsc.set_bc(b, bcs, x, -1.0)
+
+
+def assemble_vector(L) -> PETSc.Vec:
+    b = fem_petsc.assemble_vector(L)
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    return b
+
+
+def assemble_scalar(M, comm) -> float:
+    return comm.allreduce(fem.assemble_scalar(M), op=_mpi_sum())
+
+
+def _mpi_sum():
+    from mpi4py import MPI
+
+    return MPI.SUM
+
+
+def interpolate(target: fem.Function, source) -> None:
+    """Interpolate a Function, an Expression or a callable into ``target``."""
+    target.interpolate(source)
+
+
+def expression(ufl_expr, V):
+    """A compiled UFL expression evaluated at the interpolation points of V."""
+    return fem.Expression(ufl_expr, V.element.interpolation_points())
+
+
+def set_vector_from_array(vec: PETSc.Vec, f: fem.Function) -> None:
+    """Copy the owned part of ``f`` into ``vec``."""
+    n = owned_size(f.function_space)
+    vec.array[:] = f.x.array[:n]
+
+
+# --- IO --------------------------------------------------------------------------------
+
+
+def xdmf_writer(comm, path: str):
+    return XDMFFile(comm, path, "w")
+
+
+def xdmf_reader(comm, path: str):
+    return XDMFFile(comm, path, "r")

@@ -1,0 +1,316 @@
+"""Run configuration: the TOML schema with defaults, validation and ``--set`` overrides.
+
+The schema is the public contract of hydrobuckle: every key a user may write, its type, its
+default and its allowed range. Validation fails with a ``ConfigError`` whose message names the
+key and the allowed range in one line; the CLI turns it into exit code 2.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+
+class ConfigError(ValueError):
+    """A bad configuration value; ``str(err)`` is a one-line message naming the key."""
+
+    def __init__(self, key: str, message: str):
+        self.key = key
+        super().__init__(f"config key '{key}': {message}" if key else message)
+
+
+@dataclass(frozen=True)
+class Key:
+    """One config key: its type, default, and a range check with a readable description."""
+
+    type: type
+    default: Any
+    check: Callable[[Any], bool] | None = None
+    allowed: str = ""
+    doc: str = ""
+    optional: bool = False  # default None allowed (inherit / not set)
+
+
+def _gt(lo):
+    return (lambda v: v > lo), f"> {lo:g}"
+
+
+def _ge(lo):
+    return (lambda v: v >= lo), f">= {lo:g}"
+
+
+def _in_open(lo, hi):
+    return (lambda v: lo < v < hi), f"in ({lo:g}, {hi:g})"
+
+
+def _in_closed(lo, hi):
+    return (lambda v: lo <= v <= hi), f"in [{lo:g}, {hi:g}]"
+
+
+def _one_of(*options):
+    return (lambda v: v in options), "one of " + ", ".join(repr(o) for o in options)
+
+
+def _key(type_, default, rng=None, doc="", optional=False):
+    check, allowed = rng if rng else (None, "")
+    return Key(type_, default, check, allowed, doc, optional)
+
+
+GEOMETRY_KINDS = ("bilayer",)
+LOADING_KINDS = ("swelling", "compression")
+
+MATERIAL_KEYS = {
+    "shear_modulus": _key(float, 0.1, _gt(0), "gamma [MPa]; not given in the paper: an assumption"),
+    "mixing_modulus": _key(float, 24.2, _gt(0), "alpha [MPa]"),
+    "penalty": _key(float, 10.0, _gt(0), "epsilon [MPa]"),
+    "mobility": _key(float, 1.0e-4, _gt(0), "M [mm^4/(N s)]"),
+    "preswelling": _key(float, 1.01, _in_open(1.0, 100.0), "J0 [-], > 1"),
+    "interaction": _key(float, 0.1, _in_closed(-1.0, 2.0), "chi [-]"),
+}
+
+SCHEMA: dict[str, dict[str, Key] | dict] = {
+    "geometry": {
+        "kind": _key(str, "bilayer", _one_of(*GEOMETRY_KINDS)),
+        "length": _key(float, 2.0, _gt(0), "L [mm]"),
+        "substrate_thickness": _key(float, 0.5, _gt(0), "H [mm]"),
+        "film_thickness": _key(float, 0.01, _gt(0), "w [mm]"),
+    },
+    "mesh": {
+        "element_size": _key(float, 0.01, _gt(0), "element length along the film surface [mm]"),
+        "film_layers": _key(int, 4, _in_closed(1, 200), "element layers through the film"),
+        "substrate_grading": _key(float, 1.15, _in_closed(1.0, 3.0),
+                                  "element-height ratio away from the film; 1 = uniform"),
+        "quadrature_degree": _key(int, 2, _in_closed(1, 8), "quadrature degree of all cell integrals"),
+    },
+    "material": {
+        **MATERIAL_KEYS,
+        "film": {
+            "modulus_ratio": _key(float, 8.0, _gt(0), "gamma_f/gamma_s", optional=True),
+            **{k: Key(v.type, None, v.check, v.allowed, v.doc, True) for k, v in MATERIAL_KEYS.items()},
+        },
+    },
+    "loading": {
+        "kind": _key(str, "swelling", _one_of(*LOADING_KINDS)),
+        "chemical_potential": _key(float, 0.0, _in_closed(-1000.0, 0.0), "mu_bar after the ramp [MPa]"),
+        "ramp_time": _key(float, 1.0, _gt(0), "[s]"),
+        "compression_strain": _key(float, 0.1, _in_open(0.0, 0.9), "compression loading only"),
+    },
+    "time": {
+        "end": _key(float, 10.0, _gt(0), "[s]"),
+        "dt_initial": _key(float, 1.0e-3, _gt(0), "[s]"),
+        "dt_max": _key(float, 5.0, _gt(0), "[s]"),
+        "dt_min": _key(float, 1.0e-9, _gt(0), "smallest step before the run is declared failed [s]"),
+        "tolerance": _key(float, 1.0e-3, _gt(0), "local error tolerance (fluid content) of the adaptive step"),
+        "adaptive": _key(bool, True, None, "false: fixed steps of dt_initial (cut back only on divergence)"),
+        "max_steps": _key(int, 100000, _ge(1)),
+    },
+    "solver": {
+        "rtol": _key(float, 1.0e-9, _in_open(0.0, 1.0), "Newton relative residual tolerance"),
+        "atol": _key(float, 1.0e-11, _gt(0), "Newton absolute residual tolerance"),
+        "max_it": _key(int, 25, _in_closed(1, 1000), "Newton iterations per step"),
+    },
+    "output": {
+        "fields": _key(bool, True, None, "write fields.xdmf"),
+        "every": _key(int, 1, _ge(1), "write fields every n accepted steps"),
+        "plot": _key(bool, True, None, "write history.png"),
+    },
+}
+
+
+def defaults() -> dict:
+    """The fully resolved default configuration."""
+    return _defaults(SCHEMA)
+
+
+def _defaults(schema: dict) -> dict:
+    out = {}
+    for name, spec in schema.items():
+        out[name] = _defaults(spec) if isinstance(spec, dict) else copy.deepcopy(spec.default)
+    return out
+
+
+def load(path: str | Path, overrides: list[str] | None = None) -> dict:
+    """Read, merge with defaults, apply ``--set`` overrides and validate a config file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("", f"config file '{path}' does not exist")
+    try:
+        user = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError("", f"config file '{path}' is not valid TOML: {err}") from None
+    return resolve(user, overrides)
+
+
+def resolve(user: dict, overrides: list[str] | None = None) -> dict:
+    """Merge a user dict and overrides into the defaults, validating every key."""
+    cfg = defaults()
+    _merge(cfg, user, SCHEMA, prefix="")
+    for item in overrides or []:
+        key, value = parse_override(item)
+        set_dotted(cfg, key, value)
+    validate(cfg)
+    return cfg
+
+
+def parse_override(item: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` with VALUE parsed as a TOML value (bare words are taken as strings)."""
+    if "=" not in item:
+        raise ConfigError(item, "--set expects KEY=VALUE, e.g. --set material.film.modulus_ratio=20")
+    key, raw = item.split("=", 1)
+    key, raw = key.strip(), raw.strip()
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key, value
+
+
+def set_dotted(cfg: dict, key: str, value: Any) -> None:
+    """Set a dotted key after checking that the schema knows it."""
+    parts = key.split(".")
+    spec: Any = SCHEMA
+    node = cfg
+    for i, part in enumerate(parts):
+        if not isinstance(spec, dict) or part not in spec:
+            raise ConfigError(key, f"unknown key; known keys here: {_known(spec)}")
+        spec = spec[part]
+        if i < len(parts) - 1:
+            node = node[part]
+    if isinstance(spec, dict):
+        raise ConfigError(key, "is a table, set one of its keys: " + _known(spec))
+    node[parts[-1]] = value
+
+
+def _known(spec) -> str:
+    if not isinstance(spec, dict):
+        return "(none)"
+    return ", ".join(sorted(spec))
+
+
+def _merge(cfg: dict, user: dict, schema: dict, prefix: str) -> None:
+    for name, value in user.items():
+        key = f"{prefix}{name}"
+        if name not in schema:
+            raise ConfigError(key, f"unknown key; known keys here: {_known(schema)}")
+        spec = schema[name]
+        if isinstance(spec, dict):
+            if not isinstance(value, dict):
+                raise ConfigError(key, "must be a table")
+            _merge(cfg[name], value, spec, prefix=key + ".")
+        else:
+            if isinstance(value, dict):
+                raise ConfigError(key, f"must be a {spec.type.__name__}, not a table")
+            cfg[name] = value
+
+
+def _check_value(key: str, spec: Key, value: Any) -> Any:
+    if value is None:
+        if spec.optional:
+            return None
+        raise ConfigError(key, "must be set")
+    if spec.type is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(key, f"must be a number, got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ConfigError(key, f"must be finite, got {value!r}")
+    elif spec.type is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(key, f"must be an integer, got {value!r}")
+    elif spec.type is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(key, f"must be true or false, got {value!r}")
+    elif spec.type is str:
+        if not isinstance(value, str):
+            raise ConfigError(key, f"must be a string, got {value!r}")
+    if spec.check is not None and not spec.check(value):
+        raise ConfigError(key, f"= {value!r} is out of range; allowed: {spec.allowed}")
+    return value
+
+
+def _validate_tree(cfg: dict, schema: dict, prefix: str) -> None:
+    for name, spec in schema.items():
+        key = f"{prefix}{name}"
+        if isinstance(spec, dict):
+            _validate_tree(cfg[name], spec, key + ".")
+        else:
+            cfg[name] = _check_value(key, spec, cfg.get(name))
+
+
+def validate(cfg: dict) -> None:
+    """Type and range checks per key, then the checks that relate keys to each other."""
+    _validate_tree(cfg, SCHEMA, "")
+    geo, mesh, time, film = cfg["geometry"], cfg["mesh"], cfg["time"], cfg["material"]["film"]
+    if film.get("shear_modulus") is not None and film.get("modulus_ratio") is not None:
+        raise ConfigError("material.film.shear_modulus",
+                          "set either material.film.shear_modulus or material.film.modulus_ratio, not both "
+                          "(use --set material.film.modulus_ratio=... alone, or remove it from the file)")
+    if mesh["element_size"] > geo["length"] / 2:
+        raise ConfigError("mesh.element_size",
+                          f"= {mesh['element_size']:g} is too coarse; allowed: <= geometry.length/2 "
+                          f"= {geo['length'] / 2:g}")
+    if time["dt_initial"] > time["dt_max"]:
+        raise ConfigError("time.dt_initial", f"= {time['dt_initial']:g} must be <= time.dt_max = {time['dt_max']:g}")
+    if time["dt_min"] > time["dt_initial"]:
+        raise ConfigError("time.dt_min", f"= {time['dt_min']:g} must be <= time.dt_initial = {time['dt_initial']:g}")
+    if time["dt_initial"] > time["end"]:
+        raise ConfigError("time.dt_initial", f"= {time['dt_initial']:g} must be <= time.end = {time['end']:g}")
+
+
+def film_overrides(cfg: dict) -> dict:
+    """The film's material parameters: substrate values with the film's overrides applied."""
+    mat = cfg["material"]
+    film = {k: mat[k] for k in MATERIAL_KEYS}
+    for k in MATERIAL_KEYS:
+        if mat["film"].get(k) is not None:
+            film[k] = mat["film"][k]
+    if mat["film"].get("shear_modulus") is None:
+        ratio = mat["film"].get("modulus_ratio")
+        film["shear_modulus"] = mat["shear_modulus"] * (1.0 if ratio is None else ratio)
+    return film
+
+
+def substrate_parameters(cfg: dict) -> dict:
+    mat = cfg["material"]
+    return {k: mat[k] for k in MATERIAL_KEYS}
+
+
+# --- TOML writing (tomllib reads only) -------------------------------------------------------
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def dumps(cfg: dict) -> str:
+    """TOML text of a nested dict of scalars (None values are left out)."""
+    lines: list[str] = []
+
+    def table(d: dict, prefix: str) -> None:
+        scalars = {k: v for k, v in d.items() if not isinstance(v, dict) and v is not None}
+        if prefix and scalars:
+            lines.append(f"[{prefix}]")
+        for k, v in scalars.items():
+            lines.append(f"{k} = {_toml_value(v)}")
+        if scalars:
+            lines.append("")
+        for k, v in d.items():
+            if isinstance(v, dict):
+                table(v, f"{prefix}.{k}" if prefix else k)
+
+    table(cfg, "")
+    return "\n".join(lines)

@@ -1,0 +1,30 @@
+"""Rank-0 logging for hydrobuckle; silences the JIT compiler's INFO chatter."""
+
+from __future__ import annotations
+
+import logging
+import sys
+
+LOGGER_NAME = "hydrobuckle"
+
+
+def setup(comm, level: int = logging.INFO) -> logging.Logger:
+    logging.getLogger().setLevel(logging.WARNING)
+    for noisy in ("FFCx", "UFL", "ffcx", "dolfinx"):
+        logging.getLogger(noisy).setLevel(logging.WARNING)
+    log = logging.getLogger(LOGGER_NAME)
+    log.handlers.clear()
+    log.propagate = False
+    if comm.rank == 0:
+        handler = logging.StreamHandler(sys.stdout)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        log.addHandler(handler)
+        log.setLevel(level)
+    else:
+        log.addHandler(logging.NullHandler())
+        log.setLevel(logging.CRITICAL + 1)
+    return log
+
+
+def get() -> logging.Logger:
+    return logging.getLogger(LOGGER_NAME)

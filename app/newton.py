@@ -1,0 +1,93 @@
+"""PETSc SNES Newton solver for one incremental minimization step, with a direct (MUMPS) solve.
+
+dolfinx 0.5's own NewtonSolver is not SNES; here the residual and Hessian callbacks assemble
+the compiled forms of :mod:`app.potential` into PETSc objects that SNES drives. Options are set
+under a per-instance prefix so that several problems can coexist in one process.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from petsc4py import PETSc
+
+from app import compat
+
+_ids = itertools.count()
+
+
+@dataclass
+class NewtonResult:
+    converged: bool
+    iterations: int
+    reason: int
+    residual_norm: float
+
+
+class NewtonSolver:
+    """SNES (newtonls) on R(w) = 0 with Jacobian K; w is ``problem.w``."""
+
+    def __init__(self, problem, rtol: float, atol: float, max_it: int, line_search: str = "basic"):
+        self.problem = problem
+        forms = problem.forms
+        self.A = compat.create_matrix(forms.hessian)
+        self.b = compat.create_vector(forms.residual)
+        self.x = self.b.duplicate()
+        self.prefix = f"hb{next(_ids)}_"
+        opts = PETSc.Options()
+        for key, value in {
+            "snes_type": "newtonls",
+            "snes_linesearch_type": line_search,
+            "snes_rtol": rtol,
+            "snes_atol": atol,
+            "snes_stol": 0.0,
+            "snes_max_it": max_it,
+            "snes_max_funcs": 100 * max_it,
+            "ksp_type": "preonly",
+            "pc_type": "lu",
+            "pc_factor_mat_solver_type": "mumps",
+        }.items():
+            opts[self.prefix + key] = value
+        self.snes = PETSc.SNES().create(problem.comm)
+        self.snes.setOptionsPrefix(self.prefix)
+        self.snes.setFunction(self._residual, self.b)
+        self.snes.setJacobian(self._jacobian, self.A)
+        self.snes.setFromOptions()
+        self.snes.getKSP().setFromOptions()
+        self.snes.getKSP().getPC().setFromOptions()
+
+    def _sync_solution(self, x: PETSc.Vec) -> None:
+        w = self.problem.w
+        x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        x.copy(compat.function_vector(w))
+        compat.function_vector(w).ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    def _residual(self, snes, x, b):
+        self._sync_solution(x)
+        compat.assemble_residual_into(b, self.problem.forms.residual, self.problem.forms.hessian,
+                                      self.problem.bcs, x)
+
+    def _jacobian(self, snes, x, J, P):
+        compat.assemble_matrix_into(J, self.problem.forms.hessian, self.problem.bcs)
+
+    def solve(self) -> NewtonResult:
+        """Solve from the current ``problem.w`` as initial guess; ``problem.w`` holds the result."""
+        w_vec = compat.function_vector(self.problem.w)
+        w_vec.copy(self.x)
+        try:
+            self.snes.solve(None, self.x)
+            reason = self.snes.getConvergedReason()
+        except PETSc.Error:
+            reason = -100
+        its = self.snes.getIterationNumber()
+        if reason > 0:
+            self._sync_solution(self.x)
+        fnorm = self.snes.getFunctionNorm() if reason != -100 else float("nan")
+        converged = reason > 0 and np.isfinite(fnorm)
+        return NewtonResult(converged, its, reason, float(fnorm))
+
+    def destroy(self) -> None:
+        for obj in (self.snes, self.A, self.b, self.x):
+            obj.destroy()

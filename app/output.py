@@ -1,0 +1,142 @@
+"""Result directory: resolved config, history.csv, summary.json, fields.xdmf and plots.
+
+Rank 0 writes the text files; the XDMF field file is written collectively. A run first removes
+any ``summary.json`` left in the directory, so a directory holds a summary only once the run that
+wrote it has ended (``status`` says how).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import ufl
+
+from app import compat, config
+from app.material import chemical_potential
+
+RESULT_FILES = ("summary.json", "history.csv", "config.toml", "fields.xdmf", "fields.h5", "history.png")
+
+
+def versions() -> dict:
+    import dolfinx
+    import gmsh
+    from petsc4py import PETSc
+    from slepc4py import SLEPc
+
+    import app
+
+    def v(mod):
+        return ".".join(str(x) for x in mod.Sys.getVersion())
+
+    return {"hydrobuckle": app.__version__, "dolfinx": dolfinx.__version__, "petsc": v(PETSc),
+            "slepc": v(SLEPc), "gmsh": gmsh.__version__}
+
+
+def _clean(value):
+    """JSON-safe: NaN/inf become None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    return value
+
+
+class ResultWriter:
+    """Writes one run's results into ``outdir``."""
+
+    def __init__(self, outdir: str | Path, comm, cfg: dict, columns=None):
+        self.outdir = Path(outdir)
+        self.comm = comm
+        self.cfg = cfg
+        self.rank0 = comm.rank == 0
+        self.columns = list(columns) if columns else None
+        self._csv = None
+        self._writer = None
+        self._xdmf = None
+        self.rows: list[dict] = []
+        if self.rank0:
+            self.outdir.mkdir(parents=True, exist_ok=True)
+            for name in RESULT_FILES:
+                (self.outdir / name).unlink(missing_ok=True)
+            (self.outdir / "config.toml").write_text(
+                "# hydrobuckle resolved configuration (every key, defaults filled in)\n" + config.dumps(cfg))
+        comm.barrier()
+
+    # --- history ---------------------------------------------------------------------------
+
+    def history_row(self, row: dict) -> None:
+        """Append one accepted step to history.csv (flushed immediately)."""
+        self.rows.append(row)
+        if not self.rank0:
+            return
+        if self._csv is None:
+            self.columns = self.columns or list(row)
+            self._csv = open(self.outdir / "history.csv", "w", newline="")
+            self._writer = csv.DictWriter(self._csv, fieldnames=self.columns, extrasaction="ignore")
+            self._writer.writeheader()
+        self._writer.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()})
+        self._csv.flush()
+
+    # --- fields ----------------------------------------------------------------------------
+
+    def setup_fields(self, problem) -> None:
+        """Compile the post-processing expressions once: u (CG1), s, mu, J, flux H (DG0)."""
+        domain = problem.domain
+        self._xdmf = compat.xdmf_writer(self.comm, str(self.outdir / "fields.xdmf"))
+        self._xdmf.write_mesh(domain)
+        Vu = compat.vector_space(domain, "Lagrange", 1)
+        V0 = compat.scalar_space(domain, "DG", 0)
+        V0v = compat.vector_space(domain, "DG", 0)
+        # After a step is accepted, problem.state holds (u, Q) and problem.w the step's (u, dQ).
+        u, Q = ufl.split(problem.state)
+        _, dQ = ufl.split(problem.w)
+        mat = problem.mat
+        F = ufl.Identity(2) + ufl.grad(u)
+        s = mat.s0 - ufl.div(Q)
+        self._fields = []
+        for name, space, expr in (
+            ("displacement", Vu, u),
+            ("fluid_content", V0, s),
+            ("chemical_potential", V0, chemical_potential(mat, ufl.det(F), s)),
+            ("J", V0, ufl.det(F)),
+            ("flux", V0v, dQ / problem.tau),
+        ):
+            f = compat.Function(space)
+            f.name = name
+            self._fields.append((f, compat.expression(expr, space)))
+
+    def write_fields(self, t: float) -> None:
+        if self._xdmf is None:
+            return
+        for f, expr in self._fields:
+            compat.interpolate(f, expr)
+            self._xdmf.write_function(f, t)
+
+    # --- summary and plot ------------------------------------------------------------------
+
+    def summary(self, data: dict) -> None:
+        if self.rank0:
+            text = json.dumps(_clean(data), indent=2, sort_keys=False)
+            tmp = self.outdir / "summary.json.tmp"
+            tmp.write_text(text + "\n")
+            tmp.replace(self.outdir / "summary.json")
+
+    def plot_history(self) -> None:
+        if not self.rank0 or not self.rows:
+            return
+        from app.plots import history_plot
+
+        history_plot(self.rows, self.outdir / "history.png")
+
+    def close(self) -> None:
+        if self._xdmf is not None:
+            self._xdmf.close()
+            self._xdmf = None
+        if self._csv is not None:
+            self._csv.close()
+            self._csv = None

@@ -1,0 +1,85 @@
+"""The incremental potential Pi^tau of eq. 2.17 on the mixed Q1 x RTCF space, and its derivatives.
+
+The flux unknown is the fluid-volume increment of the step, dQ = tau * H (the same minimizer as
+eq. 2.17, rewritten), so that
+
+    Pi(u, dQ) = int psi(F, s) dV + int C_n:(dQ x dQ) / (2 tau J0^(1/3) M s_n) dV + int mu_bar dQ.n dA,
+    s   = s_n - Div dQ,      s_n = s0 - Div Q_n,
+
+where Q_n is the accumulated flux (kept in the RTCF space, so s_n is exact on non-affine cells).
+The step size tau enters the dissipation term only. The residual is dPi and the Hessian K = d^2 Pi
+is symmetric by construction (both from ``ufl.derivative``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import ufl
+
+from app import compat
+from app.material import chemical_potential, dissipation_increment, free_energy
+
+
+@dataclass
+class MaterialFields:
+    """Per-cell (DG0) material parameters, so any number of layers shares one set of forms."""
+
+    shear_modulus: object
+    mixing_modulus: object
+    penalty: object
+    mobility: object
+    preswelling: object
+    interaction: object
+    s0: object
+
+
+@dataclass
+class Potential:
+    """UFL expressions of one time step; compiled forms live in :class:`CompiledForms`."""
+
+    energy: object  # Pi^tau (UFL scalar form)
+    residual: object  # dPi/dw
+    hessian: object  # d^2 Pi/dw^2
+    F: object
+    s: object
+    s_n: object
+    mu: object
+
+
+def kinematics(w, state):
+    """Deformation gradient, fluid content of the step and of the previous state."""
+    u, dQ = ufl.split(w)
+    u_n, Q_n = ufl.split(state)
+    F = ufl.Identity(2) + ufl.grad(u)
+    F_n = ufl.Identity(2) + ufl.grad(u_n)
+    return u, dQ, F, F_n, Q_n
+
+
+def build(w, state, mat: MaterialFields, tau, mu_bar, dx, ds_permeable) -> Potential:
+    """Assemble Pi^tau symbolically and differentiate it.
+
+    ``ds_permeable`` is the measure of the boundary where the chemical potential is prescribed
+    (None for none); elsewhere the normal flux is fixed by Dirichlet conditions on dQ."""
+    u, dQ, F, F_n, Q_n = kinematics(w, state)
+    s_n = mat.s0 - ufl.div(Q_n)
+    s = s_n - ufl.div(dQ)
+    C_n = F_n.T * F_n
+    energy = free_energy(mat, F, s) * dx + dissipation_increment(mat, dQ, C_n, s_n, tau) * dx
+    if ds_permeable is not None:
+        n = ufl.FacetNormal(w.function_space.mesh)
+        energy += mu_bar * ufl.dot(dQ, n) * ds_permeable
+    W = w.function_space
+    residual = ufl.derivative(energy, w, ufl.TestFunction(W))
+    hessian = ufl.derivative(residual, w, ufl.TrialFunction(W))
+    mu = chemical_potential(mat, ufl.det(F), s)
+    return Potential(energy, residual, hessian, F, s, s_n, mu)
+
+
+class CompiledForms:
+    """JIT-compiled residual and Hessian (compiled once per problem, reused every step)."""
+
+    def __init__(self, pot: Potential):
+        self.residual = compat.form(pot.residual)
+        self.hessian = compat.form(pot.hessian)
+        self.energy = compat.form(pot.energy)

@@ -1,0 +1,69 @@
+"""Flat film-substrate bilayer (seed paper Fig. "bi_geo"): a structured quadrilateral mesh.
+
+The substrate [0, L] x [0, H] lies under the film [0, L] x [H, H + w]. Elements along x have
+the user's size; the film has ``film_layers`` uniform element layers; substrate element heights
+grow geometrically away from the film by ``grading`` starting one ratio above the film's.
+Physical groups: cells film, substrate; facets top, bottom, left, right.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gmsh
+import numpy as np
+
+from meshes.tagged import TaggedMesh, add_physical, gmsh_session, to_dolfinx
+
+CELLS = {"film": 1, "substrate": 2}
+FACETS = {"bottom": 1, "top": 2, "left": 3, "right": 4}
+
+
+def substrate_layer_heights(H: float, first: float, grading: float) -> np.ndarray:
+    """Element heights through the substrate, from the film downwards, summing exactly to H.
+
+    Starts near ``first`` and grows by ``grading``; the count is the one whose geometric sum
+    comes closest to H, then all heights are scaled to fit H exactly."""
+    if grading == 1.0:
+        n = max(1, round(H / first))
+    else:
+        n = max(1, round(math.log(1 + H * (grading - 1) / first) / math.log(grading)))
+    h = first * grading ** np.arange(n)
+    return h * (H / h.sum())
+
+
+def build(comm, length: float, substrate_thickness: float, film_thickness: float,
+          element_size: float, film_layers: int, grading: float, rank: int = 0,
+          msh_path: str | None = None) -> TaggedMesh:
+    L, H, w = length, substrate_thickness, film_thickness
+    nx = max(1, round(L / element_size))
+    film_h = w / film_layers
+    sub_h = substrate_layer_heights(H, film_h * grading, grading)
+    info = {"elements_along_length": nx, "film_layers": film_layers, "substrate_layers": len(sub_h),
+            "film_element_aspect": (L / nx) / film_h}
+    with gmsh_session(comm, "bilayer", rank) as active:
+        if active:
+            geo = gmsh.model.geo
+            p0, p1 = geo.addPoint(0, 0, 0), geo.addPoint(L, 0, 0)
+            base = geo.addLine(p0, p1)
+            geo.mesh.setTransfiniteCurve(base, nx + 1)
+            # Extrude upwards: heights listed bottom to top, so the finest sits under the film.
+            bottom_up = sub_h[::-1]
+            fractions = list(np.cumsum(bottom_up) / H)
+            fractions[-1] = 1.0
+            sub = geo.extrude([(1, base)], 0, H, 0, numElements=[1] * len(sub_h), heights=fractions,
+                              recombine=True)
+            film = geo.extrude([sub[0]], 0, w, 0, numElements=[film_layers], recombine=True)
+            geo.synchronize()
+            sides = [abs(t) for t in (sub[2][1], sub[3][1], film[2][1], film[3][1])]
+            left = [c for c in sides if gmsh.model.getBoundingBox(1, c)[3] < 0.5 * L]
+            right = [c for c in sides if c not in left]
+            add_physical(2, [film[1][1]], CELLS["film"], "film")
+            add_physical(2, [sub[1][1]], CELLS["substrate"], "substrate")
+            add_physical(1, [base], FACETS["bottom"], "bottom")
+            add_physical(1, [film[0][1]], FACETS["top"], "top")
+            add_physical(1, left, FACETS["left"], "left")
+            add_physical(1, right, FACETS["right"], "right")
+            gmsh.option.setNumber("Mesh.RecombineAll", 1)
+            gmsh.model.mesh.generate(2)
+        return to_dolfinx(comm, rank, CELLS, FACETS, info, msh_path)
