@@ -41,6 +41,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None) -> dict:
     if out["fields"]:
         writer.setup_fields(problem)
     writer.history_row(row_of(stepper.initial_record()))
+    if out["fields"]:
+        writer.write_fields(0.0)
     status, message = "completed", ""
     try:
         while not stepper.done():

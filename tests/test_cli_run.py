@@ -1,0 +1,77 @@
+"""End to end through the CLI: result files, their consistency, and solver-failure reporting."""
+
+import csv
+import json
+
+from mpi4py import MPI
+
+from app import cli, config
+from app.stepping import StepRecord
+
+TINY = """
+[geometry]
+length = 0.1
+substrate_thickness = 0.05
+[mesh]
+film_layers = 2
+substrate_grading = 1.3
+[time]
+end = 1.05
+dt_initial = 0.01
+dt_max = 0.1
+[output]
+every = 2
+"""
+
+
+def _write(path, text):
+    if MPI.COMM_WORLD.rank == 0:
+        path.write_text(text)
+    MPI.COMM_WORLD.barrier()
+
+
+def test_run_writes_consistent_results(shared_tmp):
+    cfg_path, out = shared_tmp / "tiny.toml", shared_tmp / "out"
+    _write(cfg_path, TINY)
+    assert cli.main(["run", str(cfg_path), "-o", str(out), "-q", "--set", "material.film.modulus_ratio=4"]) == 0
+    resolved = config.load(out / "config.toml")
+    assert resolved == config.load(cfg_path, ["material.film.modulus_ratio=4"])
+    with open(out / "history.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert tuple(rows[0]) == StepRecord.COLUMNS
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed"
+    assert summary["steps"] == len(rows) - 1
+    assert summary["ranks"] == MPI.COMM_WORLD.size
+    assert summary["final"]["time"] == float(rows[-1]["time"]) == 1.05
+    assert summary["final"]["growth_mm"] == float(rows[-1]["growth_mm"]) > 0
+    assert summary["materials"]["film"]["shear_modulus"] == 0.4
+    assert "dolfinx" in summary["versions"] and summary["assumptions"]
+    # the time grid respects the end of the ramp and mu_bar follows the ramp exactly
+    times = [float(r["time"]) for r in rows]
+    assert 1.0 in times
+    mu0 = summary["materials"]["film"]["mu0"]
+    for r in rows:
+        t = float(r["time"])
+        assert float(r["mu_bar"]) == mu0 + (0.0 - mu0) * min(t, 1.0)
+    for name in ("fields.xdmf", "fields.h5", "history.png"):
+        assert (out / name).stat().st_size > 0
+    xdmf = (out / "fields.xdmf").read_text()
+    for field in ("displacement", "fluid_content", "chemical_potential", "J", "flux"):
+        assert f'Name="{field}"' in xdmf
+    # the initial state, then every 2nd accepted step
+    assert xdmf.count('<Attribute Name="displacement"') == 1 + (len(rows) - 1) // 2
+
+
+def test_solver_failure_exits_1_and_keeps_history(shared_tmp):
+    cfg_path, out = shared_tmp / "fail.toml", shared_tmp / "out"
+    _write(cfg_path, TINY)
+    code = cli.main(["run", str(cfg_path), "-o", str(out), "-q", "--set", "solver.max_it=1",
+                     "--set", "time.dt_min=0.004"])
+    assert code == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed"
+    assert "dt_min" in summary["message"]
+    with open(out / "history.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) >= 1 and float(rows[0]["time"]) == 0.0

@@ -1,0 +1,35 @@
+"""1 rank and 2 ranks give the same history (run under ``mpirun -n 2``; skipped serially)."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from app.problem import Problem
+from app.stepping import StepRecord, TimeStepper
+from conftest import small_bilayer
+
+COLUMNS = [c for c in StepRecord.COLUMNS if c not in ("step", "newton_its", "error_estimate")]
+
+
+def _history(cfg, comm):
+    p = Problem(cfg, comm)
+    st = TimeStepper(p, cfg)
+    rows = [st.initial_record()]
+    while not st.done():
+        rows.append(st.advance())
+    st.solver.destroy()
+    return np.array([[getattr(r, c) for c in COLUMNS] for r in rows])
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run with a serial one")
+@pytest.mark.parametrize("kind", ["swelling", "compression"])
+def test_distributed_history_equals_serial(kind):
+    world = MPI.COMM_WORLD
+    cfg = small_bilayer(**{"loading.kind": kind, "time.end": 1.1 if kind == "swelling" else 0.3})
+    distributed = _history(cfg, world)
+    serial = _history(cfg, MPI.COMM_SELF)  # every rank alone
+    assert distributed.shape == serial.shape
+    scale = np.maximum(np.abs(serial), 1e-300)
+    rel = np.abs(distributed - serial) / scale
+    rel[np.abs(serial) < 1e-14] = 0.0
+    assert rel.max() < 1e-6, rel.max()
