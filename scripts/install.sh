@@ -26,6 +26,9 @@ if [ ${#missing[@]} -gt 0 ]; then
   $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
 
+if [ -n "${HYDROBUCKLE_SYSTEM_ONLY:-}" ]; then
+  exit 0  # system packages only (Docker's cached layer)
+fi
 if [ ! -x "$venv/bin/python" ]; then
   echo "install: creating venv $venv"
   /usr/bin/python3 -m venv --system-site-packages "$venv"
