@@ -127,6 +127,11 @@ def dirichlet_function_on_facets(W_sub, facets: np.ndarray, fdim: int):
     return dirichlet_zero_on_facets(W_sub, facets, fdim)
 
 
+def locate_dofs_on_facets(V, fdim: int, facets: np.ndarray) -> np.ndarray:
+    """Local dofs of a (collapsed) space V on the given facets."""
+    return np.asarray(fem.locate_dofs_topological(V, fdim, facets), dtype=np.int32)
+
+
 def bc_dof_indices(bc) -> np.ndarray:
     """Local (owned + ghost) indices in the parent space constrained by ``bc``."""
     idx, first_ghost = bc.dof_indices()

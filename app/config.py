@@ -113,6 +113,15 @@ SCHEMA: dict[str, dict[str, Key] | dict] = {
         "atol": _key(float, 1.0e-11, _gt(0), "Newton absolute residual tolerance"),
         "max_it": _key(int, 25, _in_closed(1, 1000), "Newton iterations per step"),
     },
+    "stability": {
+        "enabled": _key(bool, True, None, "test K for positive definiteness after every step"),
+        "tolerance": _key(float, 1.0e-3, _in_open(0.0, 0.5), "relative bracket width of the onset time"),
+        "stop_at_onset": _key(bool, True, None, "false: continue and record later crossings"),
+        "modes": _key(int, 3, _in_closed(1, 50), "eigenpairs reported at the onset"),
+        "eigen_every": _key(int, 0, _ge(0), "also compute lambda_min every n steps (0 = only at the onset)"),
+        "tau": _key(float, 1.0e-2, _gt(0), "increment of the dissipation block of K [s]"),
+        "max_crossings": _key(int, 20, _ge(1), "with stop_at_onset = false: stop after this many"),
+    },
     "output": {
         "fields": _key(bool, True, None, "write fields.xdmf"),
         "every": _key(int, 1, _ge(1), "write fields every n accepted steps"),

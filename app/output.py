@@ -17,7 +17,8 @@ import ufl
 from app import compat, config
 from app.material import chemical_potential
 
-RESULT_FILES = ("summary.json", "history.csv", "config.toml", "fields.xdmf", "fields.h5", "history.png")
+RESULT_FILES = ("summary.json", "history.csv", "config.toml", "fields.xdmf", "fields.h5", "history.png",
+                "mode.xdmf", "mode.h5", "mode.png")
 
 
 def versions() -> dict:
@@ -117,6 +118,31 @@ class ResultWriter:
             compat.interpolate(f, expr)
             self._xdmf.write_function(f, t)
 
+    # --- buckling mode ---------------------------------------------------------------------
+
+    def write_mode(self, problem, crossing) -> None:
+        """mode.xdmf (mode displacement normalized to max |u| = 1, and the state it buckles from)
+        and mode.png (the deformed surface region with the mode superposed)."""
+        Vu, u_dofs = problem.V_u, problem.u_dofs
+        mode = compat.Function(Vu)
+        mode.name = "mode"
+        mode.x.array[:] = crossing.mode[u_dofs]
+        peak = self.comm.allreduce(float(abs(mode.x.array).max()) if mode.x.array.size else 0.0, op=_max())
+        if peak > 0:
+            mode.x.array[:] /= peak
+        base = compat.Function(Vu)
+        base.name = "critical_displacement"
+        base.x.array[:] = crossing.state[u_dofs]
+        with compat.xdmf_writer(self.comm, str(self.outdir / "mode.xdmf")) as f:
+            f.write_mesh(problem.domain)
+            f.write_function(mode, crossing.time)
+            f.write_function(base, crossing.time)
+        polys = _gather_cells(problem, base.x.array, mode.x.array)
+        if self.rank0 and self.cfg["output"]["plot"]:
+            from app.plots import mode_plot
+
+            mode_plot(polys, self.cfg, crossing, self.outdir / "mode.png")
+
     # --- summary and plot ------------------------------------------------------------------
 
     def summary(self, data: dict) -> None:
@@ -140,3 +166,29 @@ class ResultWriter:
         if self._csv is not None:
             self._csv.close()
             self._csv = None
+
+
+def _max():
+    from mpi4py import MPI
+
+    return MPI.MAX
+
+
+def _gather_cells(problem, base: "np.ndarray", mode: "np.ndarray"):
+    """On rank 0: (vertex coordinates, base displacement, mode) per owned cell, polygon-ordered."""
+    import numpy as np
+
+    V = problem.V_u
+    X = V.tabulate_dof_coordinates()[:, :2]
+    n_cells = compat.num_owned_cells(problem.domain)
+    cells = np.array([V.dofmap.cell_dofs(c) for c in range(n_cells)], dtype=np.int64).reshape(n_cells, -1)
+    cells = cells[:, [0, 1, 3, 2]]  # tensor-product vertex order -> polygon order
+    layer = np.zeros(n_cells, dtype=np.int32)
+    ct = problem.tm.cell_tags
+    owned = ct.indices < n_cells
+    layer[ct.indices[owned]] = ct.values[owned]
+    data = (X[cells], base.reshape(-1, 2)[cells], mode.reshape(-1, 2)[cells], layer)
+    gathered = problem.comm.gather(data, root=0)
+    if problem.comm.rank != 0:
+        return None
+    return tuple(np.concatenate([g[i] for g in gathered]) for i in range(4))

@@ -26,3 +26,37 @@ def history_plot(rows: list[dict], path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def mode_plot(polys, cfg: dict, crossing, path) -> None:
+    """Surface profile of the mode, and the near-surface region deformed by the critical state with
+    the mode superposed (amplified), as in the paper's mode figures."""
+    import numpy as np
+    from matplotlib.collections import PolyCollection
+
+    X, U, M, layer = polys
+    geo = cfg["geometry"]
+    w, H = geo["film_thickness"], geo["substrate_thickness"]
+    top = H + w
+    keep = X[:, :, 1].min(axis=1) >= top - 6 * w
+    amp = 0.6 * w
+    shapes = X + U + amp * M
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 5.5), gridspec_kw={"height_ratios": [1, 1.4]})
+    surf = np.isclose(X[:, :, 1], top)
+    xs, ys = X[:, :, 0][surf], M[:, :, 1][surf]
+    order = np.argsort(xs)
+    ax1.plot(xs[order], ys[order], "-", color="C0", lw=1)
+    ax1.set_ylabel("mode $u_y$ on the surface")
+    ax1.set_title(f"critical mode: g_c = {1e3 * crossing.growth_mm:.3f} um, N_c = {crossing.wrinkle_count:g}, "
+                  f"t_c = {crossing.time:.4f} s")
+    ax1.grid(alpha=0.3)
+    colors = np.where(layer[keep] == 1, "#c44e52", "#8fb1d9")
+    coll = PolyCollection(shapes[keep], facecolors=colors, edgecolors="k", linewidths=0.1)
+    ax2.add_collection(coll)
+    ax2.autoscale_view()
+    ax2.set_xlabel("x [mm]")
+    ax2.set_ylabel("y [mm]")
+    ax2.set_title("film (red) and substrate (blue) near the surface, mode amplified", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)

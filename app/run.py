@@ -6,8 +6,10 @@ import time
 from dataclasses import asdict
 
 from app import logging_setup
+from app.onset import Crossing, locate_crossing
 from app.output import ResultWriter, versions
 from app.problem import Problem
+from app.stability import StabilityAnalyzer
 from app.stepping import StepFailure, StepRecord, TimeStepper
 
 ASSUMPTIONS = (
@@ -29,7 +31,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None) -> dict:
     """Run the transient problem of ``cfg``; write results to ``outdir``; return the summary."""
     log = logging_setup.get()
     wall0 = time.perf_counter()
-    writer = ResultWriter(outdir, comm, cfg, columns=StepRecord.COLUMNS)
+    columns = StepRecord.COLUMNS + (("negative_eigenvalues", "lambda_min") if cfg["stability"]["enabled"] else ())
+    writer = ResultWriter(outdir, comm, cfg, columns=columns)
     if problem is None:
         problem = Problem(cfg, comm)
     mats = problem.materials
@@ -37,25 +40,58 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None) -> dict:
              f"on {comm.size} rank(s); film mu0 = {mats['film'].mu0:.4f} MPa, "
              f"substrate mu0 = {mats['substrate'].mu0:.4f} MPa")
     stepper = TimeStepper(problem, cfg, log=log.info)
+    scfg = cfg["stability"]
+    analyzer = StabilityAnalyzer(problem, scfg["tau"]) if scfg["enabled"] else None
     out = cfg["output"]
     if out["fields"]:
         writer.setup_fields(problem)
-    writer.history_row(row_of(stepper.initial_record()))
+    first = stepper.initial_record()
+    count = 0
+    if analyzer is not None:
+        count = analyzer.inertia()[0]
+        first.extra.update({"negative_eigenvalues": count, "lambda_min": float("nan")})
+    writer.history_row(row_of(first))
     if out["fields"]:
         writer.write_fields(0.0)
     status, message = "completed", ""
+    crossings: list[Crossing] = []
+    snap_prev = stepper.snapshot()
     try:
         while not stepper.done():
             rec = stepper.advance()
-            writer.history_row(row_of(rec))
             if out["fields"] and rec.step % out["every"] == 0:
                 writer.write_fields(rec.time)
+            nneg = None
+            if analyzer is not None:
+                nneg = analyzer.inertia()[0]
+                lam = float("nan")
+                if scfg["eigen_every"] and rec.step % scfg["eigen_every"] == 0:
+                    lam = analyzer.eigenpairs(1)[0].value
+                rec.extra.update({"negative_eigenvalues": nneg, "lambda_min": lam})
+            writer.history_row(row_of(rec))
             log.info(f"step {rec.step:5d}  t = {rec.time:10.5f} s  dt = {rec.dt:9.3e} s  "
                      f"newton {rec.newton_its:2d}  growth = {1e3 * rec.growth_mm:9.4f} um  "
-                     f"mu_bar = {rec.mu_bar:9.3f} MPa")
+                     f"mu_bar = {rec.mu_bar:9.3f} MPa" + (f"  neg.eig. {nneg}" if nneg is not None else ""))
+            if nneg is not None and nneg > count:
+                snap_unstable = stepper.snapshot()
+                log.info(f"  K lost positive definiteness between t = {snap_prev.t:.6f} and {rec.time:.6f} s")
+                crossing = locate_crossing(stepper, analyzer, snap_prev, snap_unstable, count, scfg["tolerance"],
+                                           scfg["modes"], log=log.info)
+                crossings.append(crossing)
+                log.info(f"  onset #{len(crossings)}: t_c = {crossing.time:.6f} s, "
+                         f"growth g_c = {1e3 * crossing.growth_mm:.4f} um, N_c = {crossing.wrinkle_count:g}")
+                if len(crossings) == 1:
+                    writer.write_mode(problem, crossing)
+                count = nneg
+                stepper.restore(snap_unstable)
+                if scfg["stop_at_onset"] or len(crossings) >= scfg["max_crossings"]:
+                    break
+            snap_prev = stepper.snapshot()
     except StepFailure as err:
         status, message = "failed", str(err)
         log.info(f"hydrobuckle: solver failure: {message}")
+    if status != "failed" and analyzer is not None:
+        status = "buckled" if crossings else "stable"
     last = writer.rows[-1]
     summary = {
         "status": status,
@@ -64,6 +100,9 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None) -> dict:
         "mesh": {"cells": problem.cells(), "dofs": problem.dofs(), **problem.tm.info},
         "materials": {k: {**m.as_dict(), "s0": m.s0, "mu0": m.mu0} for k, m in mats.items()},
         "ranks": comm.size,
+        **({"critical": crossings[0].as_dict()} if crossings else {}),
+        **({"crossings": [c.as_dict() for c in crossings]} if len(crossings) > 1 or
+           (crossings and not scfg["stop_at_onset"]) else {}),
         "steps": stepper.step,
         "rejected_steps": stepper.rejected,
         "failed_solves": stepper.failed_solves,
@@ -77,6 +116,12 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None) -> dict:
     if cfg["output"]["plot"]:
         writer.plot_history()
     stepper.solver.destroy()
+    if analyzer is not None:
+        analyzer.destroy()
     log.info(f"hydrobuckle: {status} after {stepper.step} steps, t = {last['time']:.5g} s, "
              f"growth = {1e3 * last['growth_mm']:.4f} um, wall {summary['wall_time_s']:.1f} s -> {outdir}")
+    if crossings:
+        c = crossings[0]
+        log.info(f"hydrobuckle: critical growth g_c = {1e3 * c.growth_mm:.4f} um at t_c = {c.time:.6f} s, "
+                 f"wrinkle count N_c = {c.wrinkle_count:g}")
     return summary

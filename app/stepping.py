@@ -135,10 +135,11 @@ class TimeStepper:
 
     # --- one step --------------------------------------------------------------------------
 
-    def _clip(self, dt: float) -> float:
-        """Do not step across the end time or a loading kink; avoid leaving a sliver behind."""
+    def _clip(self, dt: float, until: float | None = None) -> float:
+        """Do not step across the end time, a loading kink or ``until``; avoid leaving a sliver."""
         t = self.t
-        for stop in self.kinks + [self.end]:
+        stops = sorted(self.kinks + [self.end] + ([until] if until is not None else []))
+        for stop in stops:
             if t < stop - 1e-12 * max(1.0, stop):
                 if t + dt > stop or stop - (t + dt) < 1e-3 * dt:
                     dt = stop - t
@@ -168,14 +169,15 @@ class TimeStepper:
             err = dt / (2 * dt + self.dt_prev) * self._fluid_error(dQ_pred)
         return res, err
 
-    def advance(self) -> StepRecord:
-        """Take one accepted step (with rejections and cut-backs as needed)."""
+    def advance(self, until: float | None = None) -> StepRecord:
+        """Take one accepted step (with rejections and cut-backs as needed), ending at ``until``
+        at the latest."""
         if self.step >= self.max_steps:
             raise StepFailure(f"time.max_steps = {self.max_steps} reached at t = {self.t:.6g} s")
         dt = self.dt_next if self.adaptive else self.dt_fixed
         dt = min(dt, self.dt_max)
         while True:
-            dt = self._clip(dt)
+            dt = self._clip(dt, until)
             res, err = self.attempt(dt)
             if not res.converged:
                 self.failed_solves += 1

@@ -1,0 +1,96 @@
+"""Locating a stability crossing in time: bisection between a stable and an unstable state.
+
+On the first step whose negative-eigenvalue count exceeds the previous one, the crossing is
+bracketed by the last stable and the first unstable accepted states. The bracket is halved by
+re-solving from the stable end to the midpoint (with the same error-controlled stepping) until its
+width is below ``stability.tolerance`` relative to the crossing time. At the two final ends SLEPc
+gives lambda_min; the critical time and growth are linear interpolations in lambda_min between
+them, and the eigenvector of the crossing eigenvalue at the unstable end is the buckling mode.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from app.wrinkles import wrinkle_count
+
+
+@dataclass
+class Crossing:
+    time: float
+    growth_mm: float
+    applied_strain: float
+    mu_bar: float
+    wrinkle_count: float
+    lambda_min_before: float
+    lambda_min_after: float
+    bracket: tuple[float, float]
+    negative_eigenvalues: int
+    modes: list[dict] = field(default_factory=list)
+    bisection_solves: int = 0
+    mode: np.ndarray | None = None  # mixed-space array of the buckling mode (local)
+    state: np.ndarray | None = None  # mixed-space array of the state at the unstable end
+
+    def as_dict(self) -> dict:
+        return {"time": self.time, "growth_mm": self.growth_mm, "growth_um": 1e3 * self.growth_mm,
+                "applied_strain": self.applied_strain, "mu_bar": self.mu_bar,
+                "wrinkle_count": self.wrinkle_count, "lambda_min_before": self.lambda_min_before,
+                "lambda_min_after": self.lambda_min_after, "bracket": list(self.bracket),
+                "negative_eigenvalues": self.negative_eigenvalues, "modes": self.modes,
+                "bisection_solves": self.bisection_solves}
+
+
+def mode_wrinkle_count(problem, mode: np.ndarray) -> float:
+    """Wrinkle count of a mixed-space mode array (bilayer: u_y along the top surface)."""
+    from app.wrinkles import surface_profile
+
+    x, _, uy = surface_profile(problem, mode, "top", component=1)
+    return wrinkle_count(x, uy, problem.cfg["geometry"]["length"])
+
+
+def locate_crossing(stepper, analyzer, snap_stable, snap_unstable, base_count: int, tol: float,
+                    n_modes: int, log=None) -> Crossing:
+    """Bisect the time bracket of a new negative eigenvalue; leaves the stepper at the unstable end."""
+    log = log or (lambda msg: None)
+    p = stepper.p
+    lo, hi = snap_stable, snap_unstable
+    solves = 0
+    while hi.t - lo.t > tol * hi.t:
+        mid_t = 0.5 * (lo.t + hi.t)
+        stepper.restore(lo)
+        while stepper.t < mid_t - 1e-14 * mid_t:
+            stepper.advance(until=mid_t)
+            solves += 1
+        nneg = analyzer.inertia()[0]
+        if nneg > base_count:
+            hi = stepper.snapshot()
+        else:
+            lo = stepper.snapshot()
+        log(f"  bisection: bracket [{lo.t:.6f}, {hi.t:.6f}] s")
+
+    def end_data(snap):
+        stepper.restore(snap)
+        growth = p.growth()
+        pairs = analyzer.eigenpairs(max(n_modes, base_count + 1))
+        return growth, pairs
+
+    g_lo, pairs_lo = end_data(lo)
+    g_hi, pairs_hi = end_data(hi)
+    lam_lo = pairs_lo[base_count].value if len(pairs_lo) > base_count else float("nan")
+    lam_hi = pairs_hi[base_count].value if len(pairs_hi) > base_count else float("nan")
+    if np.isfinite(lam_lo) and np.isfinite(lam_hi) and lam_lo > 0 > lam_hi:
+        frac = lam_lo / (lam_lo - lam_hi)
+    else:
+        frac = 0.5
+    t_c = lo.t + frac * (hi.t - lo.t)
+    g_c = g_lo + frac * (g_hi - g_lo)
+    mode_pair = pairs_hi[min(base_count, len(pairs_hi) - 1)]
+    modes = [{"eigenvalue": e.value, "wrinkle_count": mode_wrinkle_count(p, e.vector)} for e in pairs_hi[:n_modes]]
+    crossing = Crossing(
+        time=t_c, growth_mm=g_c, applied_strain=p.loading.applied_strain(t_c), mu_bar=p.loading.mu_bar(t_c),
+        wrinkle_count=mode_wrinkle_count(p, mode_pair.vector), lambda_min_before=lam_lo,
+        lambda_min_after=lam_hi, bracket=(lo.t, hi.t), negative_eigenvalues=base_count + 1, modes=modes,
+        bisection_solves=solves, mode=mode_pair.vector, state=p.state.x.array.copy())
+    return crossing

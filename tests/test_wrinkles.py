@@ -1,0 +1,39 @@
+"""Wrinkle counting on synthetic profiles with a known number of half-waves."""
+
+import numpy as np
+import pytest
+
+from app.wrinkles import circumferential_wavenumber, wrinkle_count
+
+L = 2.0
+X = np.linspace(0, L, 201)
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 7, 13, 27, 33])
+@pytest.mark.parametrize("shape", ["cos", "sin", "shifted"])
+def test_pure_profiles(k, shape):
+    phase = {"cos": 0.0, "sin": np.pi / 2, "shifted": 0.7}[shape]
+    y = np.cos(k * np.pi * X / L - phase)
+    assert wrinkle_count(X, y, L) == k / 2
+
+
+@pytest.mark.parametrize("k", [5, 12, 27])
+def test_end_effects_and_noise(k):
+    rng = np.random.default_rng(k)
+    envelope = np.tanh(X / 0.15) * np.tanh((L - X) / 0.15)  # wrinkles fade at the clamped ends
+    y = envelope * np.cos(k * np.pi * X / L) + 0.15 * rng.standard_normal(X.size) + 0.3 * X
+    assert wrinkle_count(X, y, L) == k / 2
+
+
+def test_localized_packet_counts_its_wavelength():
+    k = 20
+    y = np.exp(-((X - 1.0) / 0.5) ** 2) * np.sin(k * np.pi * X / L)
+    assert abs(wrinkle_count(X, y, L) - k / 2) <= 0.5
+
+
+def test_unsorted_input_and_circumferential():
+    perm = np.random.default_rng(0).permutation(X.size)
+    y = np.sin(9 * np.pi * X / L)
+    assert wrinkle_count(X[perm], y[perm], L) == 4.5
+    th = np.linspace(0, 2 * np.pi, 360, endpoint=False)
+    assert circumferential_wavenumber(th, 1 + 0.01 * np.cos(17 * th + 0.3)) == 17
