@@ -35,6 +35,13 @@ def _parser() -> argparse.ArgumentParser:
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     sub.add_parser("version", help="print hydrobuckle, dolfinx, PETSc, SLEPc and gmsh versions")
+    conv = sub.add_parser("converge", help="time-step and mesh refinement study of g_c (Richardson estimate)")
+    conv.add_argument("config")
+    conv.add_argument("-o", "--output", help="study directory (default results/<config name>-converge)")
+    conv.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    conv.add_argument("--levels", type=int, default=3, help="refinement levels per study (2..6, default 3)")
+    conv.add_argument("--only", choices=["time", "mesh"], help="run only one of the two studies")
+    conv.add_argument("-q", "--quiet", action="store_true")
     return p
 
 
@@ -73,11 +80,7 @@ def cmd_run(args) -> int:
         cfg = config.load(args.config, args.set)
     except config.ConfigError as err:
         return _input_error(comm, err)
-    import logging
-
-    from app import logging_setup
-
-    logging_setup.setup(comm, logging.WARNING if args.quiet else logging.INFO)
+    _setup_logging(comm, args.quiet)
     outdir = Path(args.output) if args.output else Path("results") / Path(args.config).stem
     from app.run import simulate
 
@@ -85,7 +88,34 @@ def cmd_run(args) -> int:
     return EXIT_OK if summary["status"] != "failed" else EXIT_SOLVER
 
 
-COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version}
+def cmd_converge(args) -> int:
+    comm = _comm()
+    try:
+        cfg = config.load(args.config, args.set)
+        if not 2 <= args.levels <= 6:
+            raise config.ConfigError("--levels", f"= {args.levels} is out of range; allowed: 2..6")
+        if not cfg["stability"]["enabled"]:
+            raise config.ConfigError("stability.enabled", "must be true for a convergence study of g_c")
+    except config.ConfigError as err:
+        return _input_error(comm, err)
+    _setup_logging(comm, args.quiet)
+    outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-converge")
+    from app.convergence import converge
+
+    studies = (args.only,) if args.only else ("time", "mesh")
+    report = converge(cfg, outdir, comm, levels=args.levels, studies=studies)
+    return EXIT_OK if report["base"] else EXIT_SOLVER
+
+
+def _setup_logging(comm, quiet: bool) -> None:
+    import logging
+
+    from app import logging_setup
+
+    logging_setup.setup(comm, logging.WARNING if quiet else logging.INFO)
+
+
+COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version, "converge": cmd_converge}
 
 
 def main(argv: list[str] | None = None) -> int:

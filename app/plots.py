@@ -60,3 +60,30 @@ def mode_plot(polys, cfg: dict, crossing, path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
+
+
+def convergence_plot(rows: list[dict], report: dict, path) -> None:
+    """g_c against the refinement parameter per study, and the estimated error (log-log)."""
+    import numpy as np
+
+    studies = list(report["studies"])
+    fig, axes = plt.subplots(1, len(studies), figsize=(5.2 * len(studies), 4), squeeze=False)
+    for ax, study in zip(axes[0], studies):
+        rs = [r for r in rows if r["study"] == study and r["g_c_um"] is not None]
+        x = np.array([r["parameter"] for r in rs])
+        g = np.array([r["g_c_um"] for r in rs])
+        ax.semilogx(x, g, "o-", label="g_c")
+        st = report["studies"][study]
+        if st["converged"] is not None:
+            ax.axhline(st["converged"], color="k", ls="--", lw=0.8, label=f"extrapolated {st['converged']:.4g} um")
+        for xi, gi, r in zip(x, g, rs):
+            ax.annotate(f"N={r['N_c']:g}", (xi, gi), textcoords="offset points", xytext=(4, 4), fontsize=8)
+        ax.set_xlabel("time tolerance" if study == "time" else "element size [mm]")
+        ax.set_ylabel("g_c [um]")
+        order = st["order"]
+        ax.set_title(f"{study}: observed order {order:.2f}" if order is not None else f"{study}: order n/a")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

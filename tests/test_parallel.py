@@ -33,3 +33,17 @@ def test_distributed_history_equals_serial(kind):
     rel = np.abs(distributed - serial) / scale
     rel[np.abs(serial) < 1e-14] = 0.0
     assert rel.max() < 1e-6, rel.max()
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run with a serial one")
+def test_distributed_onset_equals_serial(shared_tmp):
+    from app.run import simulate
+    from test_stability import swelling_case
+
+    cfg = swelling_case()
+    world = MPI.COMM_WORLD
+    dist = simulate(cfg, shared_tmp / "dist", world)["critical"]
+    serial = simulate(cfg, shared_tmp / f"serial{world.rank}", MPI.COMM_SELF)["critical"]
+    assert dist["growth_mm"] == pytest.approx(serial["growth_mm"], rel=1e-3)
+    assert dist["time"] == pytest.approx(serial["time"], rel=1e-3)
+    assert dist["wrinkle_count"] == serial["wrinkle_count"]

@@ -1,0 +1,156 @@
+"""Time-step and mesh refinement study of the critical growth: ``hydrobuckle converge``.
+
+Time: the adaptive integrator's tolerance is divided by ``time_factor`` (4) per level; for backward
+Euler with local-error control the steps scale as sqrt(tolerance), so each level halves the steps
+(refinement ratio 2). With ``time.adaptive = false`` the fixed step is halved instead. Mesh: the
+element size along the surface is divided and the number of film element layers multiplied by
+``mesh_factor`` (2) per level, so element shapes are kept while h halves.
+
+For each study the three finest levels give a Richardson estimate: observed order
+p = log(|g0 - g1| / |g1 - g2|) / log r, converged value g_inf = g2 + (g2 - g1)/(r^p - 1), and each
+level's error |g_k - g_inf|. The base configuration's total error estimate is the sum of its time
+and mesh errors; its converged estimate adds both corrections.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import json
+import math
+from pathlib import Path
+
+from app import config, logging_setup
+from app.run import simulate
+
+
+def richardson(values: list[float], ratio: float) -> dict:
+    """Richardson extrapolation of a sequence refined by a constant ratio (last three values)."""
+    out = {"values": list(values), "ratio": ratio, "order": None, "converged": None, "errors": None,
+           "monotone": None}
+    if len(values) < 2 or any(v is None for v in values):
+        return out
+    if len(values) == 2:
+        g0, g1 = values
+        p = 1.0
+    else:
+        g0, g1, g2 = values[-3:]
+        d1, d2 = g0 - g1, g1 - g2
+        out["monotone"] = bool(d1 * d2 > 0)
+        if d1 == 0 or d2 == 0 or d1 * d2 < 0:
+            p = None
+        else:
+            p = math.log(abs(d1) / abs(d2)) / math.log(ratio)
+        g0, g1 = g1, g2
+    if p is None:
+        # Not in the asymptotic range: take the finest value; add the largest change as its error.
+        g_inf = values[-1]
+        spread = max(abs(a - b) for a, b in zip(values[:-1], values[1:]))
+        out.update(converged=g_inf, errors=[abs(v - g_inf) + spread for v in values])
+        return out
+    p_used = min(max(p, 0.5), 4.0)
+    g_inf = g1 + (g1 - g0) / (ratio ** p_used - 1)
+    out.update(order=p, converged=g_inf, errors=[abs(v - g_inf) for v in values])
+    return out
+
+
+def refined_configs(cfg: dict, study: str, levels: int, time_factor: float, mesh_factor: float):
+    """(label, parameter value, config) per level, level 0 = the base config."""
+    out = []
+    for k in range(levels):
+        c = copy.deepcopy(cfg)
+        if study == "time":
+            if c["time"]["adaptive"]:
+                c["time"]["tolerance"] = cfg["time"]["tolerance"] / time_factor ** k
+                value = c["time"]["tolerance"]
+            else:
+                c["time"]["dt_initial"] = cfg["time"]["dt_initial"] / 2 ** k
+                c["time"]["dt_min"] = min(c["time"]["dt_min"], c["time"]["dt_initial"])
+                value = c["time"]["dt_initial"]
+        else:
+            c["mesh"]["element_size"] = cfg["mesh"]["element_size"] / mesh_factor ** k
+            c["mesh"]["film_layers"] = int(round(cfg["mesh"]["film_layers"] * mesh_factor ** k))
+            value = c["mesh"]["element_size"]
+        c["output"]["fields"] = False
+        c["stability"]["stop_at_onset"] = True
+        config.validate(c)
+        out.append((f"{study}{k}", value, c))
+    return out
+
+
+def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"), time_factor: float = 4.0,
+             mesh_factor: float = 2.0) -> dict:
+    """Run the refinement studies; write convergence.csv/.json/.md/.png; return the report."""
+    log = logging_setup.get()
+    outdir = Path(outdir)
+    rows = []
+    report: dict = {"base": {}, "studies": {}}
+    base_summary = None
+    for study in studies:
+        values = []
+        for label, value, c in refined_configs(cfg, study, levels, time_factor, mesh_factor):
+            level = int(label[len(study):])
+            if level == 0 and base_summary is not None:
+                s = base_summary  # level 0 of every study is the base configuration: run it once
+            else:
+                log.info(f"converge: {label} ({'tolerance' if study == 'time' else 'element_size'} = {value:g})")
+                s = simulate(c, outdir / ("base" if level == 0 else label), comm)
+                if level == 0:
+                    base_summary = s
+            crit = s.get("critical", {})
+            row = {"study": study, "level": level, "parameter": value,
+                   "film_layers": c["mesh"]["film_layers"], "status": s["status"],
+                   "g_c_um": crit.get("growth_um"), "N_c": crit.get("wrinkle_count"), "t_c": crit.get("time"),
+                   "dofs": s["mesh"]["dofs"], "steps": s["steps"], "wall_time_s": s["wall_time_s"]}
+            rows.append(row)
+            values.append(row["g_c_um"])
+        ratio = 2.0 if study == "time" else mesh_factor
+        rich = richardson(values, ratio)
+        rich["N_c"] = [r["N_c"] for r in rows if r["study"] == study]
+        report["studies"][study] = rich
+    base = next((r for r in rows if r["level"] == 0), None)
+    if base is not None and base["g_c_um"] is not None:
+        g = base["g_c_um"]
+        corr = sum((st["converged"] - g) for st in report["studies"].values() if st["converged"] is not None)
+        err = sum(st["errors"][0] for st in report["studies"].values() if st["errors"])
+        report["base"] = {"g_c_um": g, "N_c": base["N_c"], "converged_estimate_um": g + corr,
+                          "error_estimate_um": err, "relative_error": err / abs(g + corr) if g + corr else None}
+    if comm.rank == 0:
+        _write(outdir, rows, report)
+    b = report["base"]
+    if b:
+        log.info(f"converge: base g_c = {b['g_c_um']:.4f} um, converged estimate {b['converged_estimate_um']:.4f} um, "
+                 f"estimated error {b['error_estimate_um']:.4f} um ({100 * (b['relative_error'] or 0):.2f}%)")
+    return report
+
+
+def _write(outdir: Path, rows: list[dict], report: dict) -> None:
+    outdir.mkdir(parents=True, exist_ok=True)
+    with open(outdir / "convergence.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    (outdir / "convergence.json").write_text(json.dumps({"rows": rows, **report}, indent=2) + "\n")
+    lines = ["| study | level | parameter | film layers | dofs | steps | g_c [um] | N_c | error est. [um] |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        st = report["studies"][r["study"]]
+        err = st["errors"][r["level"]] if st["errors"] else None
+        lines.append(f"| {r['study']} | {r['level']} | {r['parameter']:g} | {r['film_layers']} | {r['dofs']} | "
+                     f"{r['steps']} | {_fmt(r['g_c_um'])} | {_fmt(r['N_c'])} | {_fmt(err)} |")
+    for name, st in report["studies"].items():
+        lines.append(f"\n{name}: observed order {_fmt(st['order'])}, converged g_c {_fmt(st['converged'])} um")
+    if report["base"]:
+        b = report["base"]
+        lines.append(f"\nbase: g_c = {b['g_c_um']:.4f} um, converged estimate {b['converged_estimate_um']:.4f} um, "
+                     f"estimated error {b['error_estimate_um']:.4f} um")
+    (outdir / "convergence.md").write_text("\n".join(lines) + "\n")
+    from app.plots import convergence_plot
+
+    convergence_plot(rows, report, outdir / "convergence.png")
+
+
+def _fmt(v):
+    if v is None:
+        return "-"
+    return f"{v:.4g}" if isinstance(v, float) else str(v)

@@ -1,0 +1,52 @@
+"""Closed-form references used to validate the stability analysis.
+
+Stiff film on a compliant substrate in plane strain (Allen; Chen & Hutchinson): a film of
+thickness h on a deep substrate wrinkles at the compressive strain
+
+    eps_c = (1/4) (3 Es/Ef)^(2/3),   wavelength  l_c = 2 pi h (Ef / (3 Es))^(1/3),
+
+with plane-strain moduli E = 2 mu/(1 - nu) of the linearized material. For the hydrogel with the
+fluid content frozen (undrained, as in ``loading.kind = "compression"``) the plane-strain modulus
+is obtained here directly from the constitutive model: uniaxial in-plane stress (P_yy = 0) at a
+small strain, E = dP_xx/de. Biot: an incompressible neo-Hookean half-space under plane-strain
+compression becomes unstable at the stretch 0.5437.
+"""
+
+from __future__ import annotations
+
+import math
+
+from scipy.optimize import brentq
+
+from app.material import Hydrogel
+
+BIOT_STRETCH = 0.5437
+
+
+def _undrained_pxx(mat: Hydrogel, e: float) -> float:
+    """P_xx of F = diag(1 + e, l) with P_yy = 0 and s = s0 (plane strain)."""
+    g, eps, J0, s0 = mat.shear_modulus, mat.penalty, mat.preswelling, mat.s0
+    a = 1.0 + e
+
+    def p(a_, lam):
+        J = a_ * lam
+        return g / J0 * (J0 ** (2 / 3) * lam - 1 / lam) + eps * (J * J0 - 1 - s0) * a_
+
+    lam = brentq(lambda l_: p(a, l_), 0.2, 5.0, xtol=1e-15, rtol=1e-15)
+    J = a * lam
+    return g / J0 * (J0 ** (2 / 3) * a - 1 / a) + eps * (J * J0 - 1 - s0) * lam
+
+
+def plane_strain_modulus(mat: Hydrogel, strain: float = 1e-5) -> float:
+    """E_bar = 2 mu/(1 - nu) of the linearized undrained material (central difference)."""
+    return (_undrained_pxx(mat, strain) - _undrained_pxx(mat, -strain)) / (2 * strain)
+
+
+def film_wrinkling_strain(film: Hydrogel, substrate: Hydrogel) -> float:
+    Ef, Es = plane_strain_modulus(film), plane_strain_modulus(substrate)
+    return 0.25 * (3 * Es / Ef) ** (2 / 3)
+
+
+def film_wrinkling_wavelength(film: Hydrogel, substrate: Hydrogel, thickness: float) -> float:
+    Ef, Es = plane_strain_modulus(film), plane_strain_modulus(substrate)
+    return 2 * math.pi * thickness * (Ef / (3 * Es)) ** (1 / 3)
