@@ -41,6 +41,8 @@ def _parser() -> argparse.ArgumentParser:
     conv.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     conv.add_argument("--levels", type=int, default=3, help="refinement levels per study (2..6, default 3)")
     conv.add_argument("--only", choices=["time", "mesh"], help="run only one of the two studies")
+    conv.add_argument("--coarsen", action="store_true",
+                      help="levels coarser than the config (cheap error estimate of the config itself)")
     conv.add_argument("-q", "--quiet", action="store_true")
     return p
 
@@ -85,6 +87,17 @@ def cmd_run(args) -> int:
     from app.run import simulate
 
     summary = simulate(cfg, outdir, comm)
+    if summary["status"] == "buckled" and cfg["stability"]["error_estimate"]:
+        from app.convergence import companion_error_estimate
+        from app.logging_setup import get
+        from app.output import rewrite_summary
+
+        est = companion_error_estimate(cfg, summary["critical"]["growth_um"], outdir, comm)
+        summary["critical"]["discretization_error"] = est
+        rewrite_summary(outdir, comm, summary)
+        c = summary["critical"]
+        get().info(f"hydrobuckle: g_c = {c['growth_um']:.4f} um +- {est['total_um']:.4f} um (estimated "
+                   f"discretization error: time {est.get('time_um') or 0:.4f}, mesh {est.get('mesh_um') or 0:.4f})")
     return EXIT_OK if summary["status"] != "failed" else EXIT_SOLVER
 
 
@@ -103,7 +116,14 @@ def cmd_converge(args) -> int:
     from app.convergence import converge
 
     studies = (args.only,) if args.only else ("time", "mesh")
-    report = converge(cfg, outdir, comm, levels=args.levels, studies=studies)
+    try:
+        from app.convergence import refined_configs
+
+        for study in studies:
+            refined_configs(cfg, study, args.levels, 4.0, 2.0, args.coarsen)
+    except config.ConfigError as err:
+        return _input_error(comm, err)
+    report = converge(cfg, outdir, comm, levels=args.levels, studies=studies, coarsen=args.coarsen)
     return EXIT_OK if report["base"] else EXIT_SOLVER
 
 

@@ -80,11 +80,16 @@ SCHEMA: dict[str, dict[str, Key] | dict] = {
         "film_thickness": _key(float, 0.01, _gt(0), "w [mm]"),
     },
     "mesh": {
-        "element_size": _key(float, 0.01, _gt(0), "element length along the film surface [mm]"),
-        "film_layers": _key(int, 4, _in_closed(1, 200), "element layers through the film"),
+        "element_size": _key(float, 0.004, _gt(0), "element length along the film surface [mm]"),
+        "film_layers": _key(int, 8, _in_closed(1, 200), "element layers through the film"),
         "substrate_grading": _key(float, 1.15, _in_closed(1.0, 3.0),
                                   "element-height ratio away from the film; 1 = uniform"),
-        "quadrature_degree": _key(int, 2, _in_closed(1, 8), "quadrature degree of all cell integrals"),
+        "film_grading": _key(float, 1.0, _in_closed(1.0, 4.0),
+                             "film element-height ratio towards the permeable surface; 1 = uniform"),
+        "quadrature_degree": _key(int, 2, _in_closed(1, 8), "quadrature degree of the cell integrals"),
+        "coupling_quadrature_degree": _key(int, 1, _in_closed(0, 8),
+                                           "quadrature degree of the volumetric penalty term (0/1 = one point: "
+                                           "selective reduced integration)"),
     },
     "material": {
         **MATERIAL_KEYS,
@@ -104,7 +109,7 @@ SCHEMA: dict[str, dict[str, Key] | dict] = {
         "dt_initial": _key(float, 1.0e-3, _gt(0), "[s]"),
         "dt_max": _key(float, 5.0, _gt(0), "[s]"),
         "dt_min": _key(float, 1.0e-9, _gt(0), "smallest step before the run is declared failed [s]"),
-        "tolerance": _key(float, 1.0e-3, _gt(0), "local error tolerance (fluid content) of the adaptive step"),
+        "tolerance": _key(float, 5.0e-4, _gt(0), "local error tolerance (fluid content) of the adaptive step"),
         "adaptive": _key(bool, True, None, "false: fixed steps of dt_initial (cut back only on divergence)"),
         "max_steps": _key(int, 100000, _ge(1)),
     },
@@ -121,6 +126,8 @@ SCHEMA: dict[str, dict[str, Key] | dict] = {
         "eigen_every": _key(int, 0, _ge(0), "also compute lambda_min every n steps (0 = only at the onset)"),
         "tau": _key(float, 1.0e-2, _gt(0), "increment of the dissipation block of K [s]"),
         "max_crossings": _key(int, 20, _ge(1), "with stop_at_onset = false: stop after this many"),
+        "error_estimate": _key(bool, False, None,
+                               "estimate g_c's discretization error with two coarsened companion runs"),
     },
     "output": {
         "fields": _key(bool, True, None, "write fields.xdmf"),

@@ -54,22 +54,31 @@ def richardson(values: list[float], ratio: float) -> dict:
     return out
 
 
-def refined_configs(cfg: dict, study: str, levels: int, time_factor: float, mesh_factor: float):
-    """(label, parameter value, config) per level, level 0 = the base config."""
+def refined_configs(cfg: dict, study: str, levels: int, time_factor: float, mesh_factor: float,
+                    coarsen: bool = False):
+    """(label, parameter value, config) per level, level 0 = the base config; level k is refined k
+    times, or coarsened k times with ``coarsen`` (cheaper: the base is then the finest level)."""
     out = []
     for k in range(levels):
+        e = -k if coarsen else k
         c = copy.deepcopy(cfg)
         if study == "time":
             if c["time"]["adaptive"]:
-                c["time"]["tolerance"] = cfg["time"]["tolerance"] / time_factor ** k
+                c["time"]["tolerance"] = cfg["time"]["tolerance"] / time_factor ** e
                 value = c["time"]["tolerance"]
             else:
-                c["time"]["dt_initial"] = cfg["time"]["dt_initial"] / 2 ** k
+                c["time"]["dt_initial"] = cfg["time"]["dt_initial"] / 2 ** e
                 c["time"]["dt_min"] = min(c["time"]["dt_min"], c["time"]["dt_initial"])
+                c["time"]["dt_max"] = max(c["time"]["dt_max"], c["time"]["dt_initial"])
                 value = c["time"]["dt_initial"]
         else:
-            c["mesh"]["element_size"] = cfg["mesh"]["element_size"] / mesh_factor ** k
-            c["mesh"]["film_layers"] = int(round(cfg["mesh"]["film_layers"] * mesh_factor ** k))
+            c["mesh"]["element_size"] = cfg["mesh"]["element_size"] / mesh_factor ** e
+            layers = cfg["mesh"]["film_layers"] * mesh_factor ** e
+            if layers < 1 or abs(layers - round(layers)) > 1e-9:
+                raise config.ConfigError("mesh.film_layers", f"= {cfg['mesh']['film_layers']} cannot be coarsened "
+                                         f"{k} times by {mesh_factor:g}; allowed: a multiple of "
+                                         f"{mesh_factor ** k:g}")
+            c["mesh"]["film_layers"] = int(round(layers))
             value = c["mesh"]["element_size"]
         c["output"]["fields"] = False
         c["stability"]["stop_at_onset"] = True
@@ -79,16 +88,17 @@ def refined_configs(cfg: dict, study: str, levels: int, time_factor: float, mesh
 
 
 def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"), time_factor: float = 4.0,
-             mesh_factor: float = 2.0) -> dict:
+             mesh_factor: float = 2.0, coarsen: bool = False) -> dict:
     """Run the refinement studies; write convergence.csv/.json/.md/.png; return the report."""
+    plans = {study: refined_configs(cfg, study, levels, time_factor, mesh_factor, coarsen) for study in studies}
     log = logging_setup.get()
     outdir = Path(outdir)
     rows = []
-    report: dict = {"base": {}, "studies": {}}
+    report: dict = {"base": {}, "studies": {}, "direction": "coarsen" if coarsen else "refine"}
     base_summary = None
     for study in studies:
         values = []
-        for label, value, c in refined_configs(cfg, study, levels, time_factor, mesh_factor):
+        for label, value, c in plans[study]:
             level = int(label[len(study):])
             if level == 0 and base_summary is not None:
                 s = base_summary  # level 0 of every study is the base configuration: run it once
@@ -105,7 +115,13 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
             rows.append(row)
             values.append(row["g_c_um"])
         ratio = 2.0 if study == "time" else mesh_factor
-        rich = richardson(values, ratio)
+        if coarsen:  # Richardson wants coarse -> fine; map its errors back to the levels
+            rich = richardson(values[::-1], ratio)
+            if rich["errors"]:
+                rich["errors"] = rich["errors"][::-1]
+            rich["values"] = values
+        else:
+            rich = richardson(values, ratio)
         rich["N_c"] = [r["N_c"] for r in rows if r["study"] == study]
         report["studies"][study] = rich
     base = next((r for r in rows if r["level"] == 0), None)
@@ -154,3 +170,41 @@ def _fmt(v):
     if v is None:
         return "-"
     return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+# Orders assumed by the single-run error estimate (measured in docs/validation.md: time ~1.2,
+# mesh ~1.8 on the default bilayer); the lower values make the estimate conservative.
+ASSUMED_TIME_ORDER = 1.0
+ASSUMED_MESH_ORDER = 1.5
+
+
+def companion_error_estimate(cfg: dict, g_c_um: float, outdir, comm) -> dict:
+    """Discretization error of one run's g_c from two cheaper companion runs.
+
+    Time: the same mesh with the tolerance x4 (steps x2); mesh: element size x2 and half the film
+    layers (when even). Each error is |g - g_coarse| / (2^p - 1) with the assumed order p."""
+    log = logging_setup.get()
+    out = {"method": f"companion runs coarsened by 2 in time and mesh, assumed orders "
+                     f"{ASSUMED_TIME_ORDER:g} (time) and {ASSUMED_MESH_ORDER:g} (mesh)"}
+    total = 0.0
+    for study, order in (("time", ASSUMED_TIME_ORDER), ("mesh", ASSUMED_MESH_ORDER)):
+        try:
+            _, _, c = refined_configs(cfg, study, 2, 4.0, 2.0, coarsen=True)[1]
+        except config.ConfigError as err:
+            out[f"{study}_um"] = None
+            out[f"{study}_note"] = str(err)
+            continue
+        c["output"]["plot"] = False
+        log.info(f"error estimate: companion run coarsened in {study}")
+        s = simulate(c, Path(outdir) / "error-estimate" / study, comm)
+        g = s.get("critical", {}).get("growth_um")
+        if g is None:
+            out[f"{study}_um"] = None
+            continue
+        err = abs(g_c_um - g) / (2 ** order - 1)
+        out[f"{study}_um"] = err
+        out[f"{study}_companion_g_c_um"] = g
+        total += err
+    out["total_um"] = total
+    out["relative"] = total / g_c_um if g_c_um else None
+    return out

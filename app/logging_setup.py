@@ -9,7 +9,14 @@ LOGGER_NAME = "hydrobuckle"
 
 
 def setup(comm, level: int = logging.INFO) -> logging.Logger:
-    logging.getLogger().setLevel(logging.WARNING)
+    # The JIT's build step (setuptools) lowers the root logger's level to INFO and would call
+    # basicConfig; a root handler of our own, filtering at WARNING, keeps its chatter out.
+    root = logging.getLogger()
+    root.setLevel(logging.WARNING)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setLevel(logging.WARNING)
+    handler.setFormatter(logging.Formatter("%(levelname)s:%(name)s: %(message)s"))
+    root.handlers = [handler]
     for noisy in ("FFCx", "UFL", "ffcx", "dolfinx"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
     log = logging.getLogger(LOGGER_NAME)

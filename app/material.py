@@ -52,17 +52,23 @@ def _log(x):
     return ufl.ln(x) if isinstance(x, ufl.core.expr.Expr) else math.log(x)
 
 
-def free_energy(mat, F, s):
-    """psi(F, s) of eq. 3.4 in plane strain; F is 2x2 (UFL), s the fluid content.
+def free_energy_parts(mat, F, s):
+    """(network, mixing, coupling) parts of psi(F, s) of eq. 3.4 in plane strain.
 
-    ``mat`` may hold floats or UFL coefficients (per-cell parameter fields)."""
+    F is 2x2 (UFL), s the fluid content; ``mat`` may hold floats or UFL coefficients (per-cell
+    parameter fields). The coupling part is the penalty on J J0 = 1 + s, the volumetric constraint."""
     g, a, e, J0, chi = mat.shear_modulus, mat.mixing_modulus, mat.penalty, mat.preswelling, mat.interaction
     J = ufl.det(F)
     FF = ufl.inner(F, F) + 1.0  # out-of-plane stretch 1
     psi_mech = g / (2 * J0) * (J0 ** (2.0 / 3.0) * FF - 3 - 2 * ufl.ln(J * J0))
     psi_chem = a / J0 * (s * ufl.ln(s / (1 + s)) + chi * s / (1 + s))
     psi_coup = e / (2 * J0) * (J * J0 - 1 - s) ** 2
-    return psi_mech + psi_chem + psi_coup
+    return psi_mech, psi_chem, psi_coup
+
+
+def free_energy(mat, F, s):
+    """psi(F, s) of eq. 3.4 in plane strain."""
+    return sum(free_energy_parts(mat, F, s))
 
 
 def chemical_potential(mat, J, s):

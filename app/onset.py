@@ -14,7 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from app.wrinkles import wrinkle_count
+from app.wrinkles import band_vertex, wrinkle_count
+
+BAND_MODES = 8  # eigenpairs sampled at the unstable end to locate the minimum of lambda(N)
 
 
 @dataclass
@@ -24,6 +26,7 @@ class Crossing:
     applied_strain: float
     mu_bar: float
     wrinkle_count: float
+    first_mode_wrinkle_count: float
     lambda_min_before: float
     lambda_min_after: float
     bracket: tuple[float, float]
@@ -36,10 +39,12 @@ class Crossing:
     def as_dict(self) -> dict:
         return {"time": self.time, "growth_mm": self.growth_mm, "growth_um": 1e3 * self.growth_mm,
                 "applied_strain": self.applied_strain, "mu_bar": self.mu_bar,
-                "wrinkle_count": self.wrinkle_count, "lambda_min_before": self.lambda_min_before,
+                "wrinkle_count": self.wrinkle_count, "first_mode_wrinkle_count": self.first_mode_wrinkle_count,
+                "lambda_min_before": self.lambda_min_before,
                 "lambda_min_after": self.lambda_min_after, "bracket": list(self.bracket),
                 "negative_eigenvalues": self.negative_eigenvalues, "modes": self.modes,
-                "bisection_solves": self.bisection_solves}
+                "bisection_solves": self.bisection_solves,
+                "discretization_error": None}  # filled by stability.error_estimate / hydrobuckle converge
 
 
 def mode_wrinkle_count(problem, mode: np.ndarray) -> float:
@@ -70,14 +75,12 @@ def locate_crossing(stepper, analyzer, snap_stable, snap_unstable, base_count: i
             lo = stepper.snapshot()
         log(f"  bisection: bracket [{lo.t:.6f}, {hi.t:.6f}] s")
 
-    def end_data(snap):
+    def end_data(snap, n):
         stepper.restore(snap)
-        growth = p.growth()
-        pairs = analyzer.eigenpairs(max(n_modes, base_count + 1))
-        return growth, pairs
+        return p.growth(), analyzer.eigenpairs(n)
 
-    g_lo, pairs_lo = end_data(lo)
-    g_hi, pairs_hi = end_data(hi)
+    g_lo, pairs_lo = end_data(lo, base_count + 1)
+    g_hi, pairs_hi = end_data(hi, max(n_modes, base_count + BAND_MODES))
     lam_lo = pairs_lo[base_count].value if len(pairs_lo) > base_count else float("nan")
     lam_hi = pairs_hi[base_count].value if len(pairs_hi) > base_count else float("nan")
     if np.isfinite(lam_lo) and np.isfinite(lam_hi) and lam_lo > 0 > lam_hi:
@@ -87,10 +90,14 @@ def locate_crossing(stepper, analyzer, snap_stable, snap_unstable, base_count: i
     t_c = lo.t + frac * (hi.t - lo.t)
     g_c = g_lo + frac * (g_hi - g_lo)
     mode_pair = pairs_hi[min(base_count, len(pairs_hi) - 1)]
-    modes = [{"eigenvalue": e.value, "wrinkle_count": mode_wrinkle_count(p, e.vector)} for e in pairs_hi[:n_modes]]
+    counts = [mode_wrinkle_count(p, e.vector) for e in pairs_hi]
+    modes = [{"eigenvalue": e.value, "wrinkle_count": n} for e, n in zip(pairs_hi, counts)][:n_modes]
+    first = counts[min(base_count, len(counts) - 1)]
+    vertex = band_vertex(counts[base_count:], [e.value for e in pairs_hi[base_count:]])
     crossing = Crossing(
         time=t_c, growth_mm=g_c, applied_strain=p.loading.applied_strain(t_c), mu_bar=p.loading.mu_bar(t_c),
-        wrinkle_count=mode_wrinkle_count(p, mode_pair.vector), lambda_min_before=lam_lo,
+        wrinkle_count=vertex if vertex is not None else first, first_mode_wrinkle_count=first,
+        lambda_min_before=lam_lo,
         lambda_min_after=lam_hi, bracket=(lo.t, hi.t), negative_eigenvalues=base_count + 1, modes=modes,
         bisection_solves=solves, mode=mode_pair.vector, state=p.state.x.array.copy())
     return crossing

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shutil
 from pathlib import Path
 
 import ufl
@@ -47,6 +48,14 @@ def _clean(value):
     return value
 
 
+def rewrite_summary(outdir, comm, summary: dict) -> None:
+    """Replace summary.json (rank 0, atomically) after a run's summary was extended."""
+    if comm.rank == 0:
+        tmp = Path(outdir) / "summary.json.tmp"
+        tmp.write_text(json.dumps(_clean(summary), indent=2) + "\n")
+        tmp.replace(Path(outdir) / "summary.json")
+
+
 class ResultWriter:
     """Writes one run's results into ``outdir``."""
 
@@ -64,6 +73,7 @@ class ResultWriter:
             self.outdir.mkdir(parents=True, exist_ok=True)
             for name in RESULT_FILES:
                 (self.outdir / name).unlink(missing_ok=True)
+            shutil.rmtree(self.outdir / "error-estimate", ignore_errors=True)
             (self.outdir / "config.toml").write_text(
                 "# hydrobuckle resolved configuration (every key, defaults filled in)\n" + config.dumps(cfg))
         comm.barrier()
@@ -146,11 +156,7 @@ class ResultWriter:
     # --- summary and plot ------------------------------------------------------------------
 
     def summary(self, data: dict) -> None:
-        if self.rank0:
-            text = json.dumps(_clean(data), indent=2, sort_keys=False)
-            tmp = self.outdir / "summary.json.tmp"
-            tmp.write_text(text + "\n")
-            tmp.replace(self.outdir / "summary.json")
+        rewrite_summary(self.outdir, self.comm, data)
 
     def plot_history(self) -> None:
         if not self.rank0 or not self.rows:

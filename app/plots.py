@@ -47,8 +47,9 @@ def mode_plot(polys, cfg: dict, crossing, path) -> None:
     order = np.argsort(xs)
     ax1.plot(xs[order], ys[order], "-", color="C0", lw=1)
     ax1.set_ylabel("mode $u_y$ on the surface")
-    ax1.set_title(f"critical mode: g_c = {1e3 * crossing.growth_mm:.3f} um, N_c = {crossing.wrinkle_count:g}, "
-                  f"t_c = {crossing.time:.4f} s")
+    ax1.set_title(f"g_c = {1e3 * crossing.growth_mm:.3f} um, N_c = {crossing.wrinkle_count:g}, "
+                  f"t_c = {crossing.time:.4f} s; first critical mode shown (N = "
+                  f"{crossing.first_mode_wrinkle_count:g})", fontsize=10)
     ax1.grid(alpha=0.3)
     colors = np.where(layer[keep] == 1, "#c44e52", "#8fb1d9")
     coll = PolyCollection(shapes[keep], facecolors=colors, edgecolors="k", linewidths=0.1)

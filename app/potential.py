@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import ufl
 
 from app import compat
-from app.material import chemical_potential, dissipation_increment, free_energy
+from app.material import chemical_potential, dissipation_increment, free_energy_parts
 
 
 @dataclass
@@ -56,16 +56,21 @@ def kinematics(w, state):
     return u, dQ, F, F_n, Q_n
 
 
-def build(w, state, mat: MaterialFields, tau, mu_bar, dx, ds_permeable) -> Potential:
+def build(w, state, mat: MaterialFields, tau, mu_bar, dx, ds_permeable, dx_coupling=None) -> Potential:
     """Assemble Pi^tau symbolically and differentiate it.
 
     ``ds_permeable`` is the measure of the boundary where the chemical potential is prescribed
-    (None for none); elsewhere the normal flux is fixed by Dirichlet conditions on dQ."""
+    (None for none); elsewhere the normal flux is fixed by Dirichlet conditions on dQ.
+    ``dx_coupling`` integrates the volumetric penalty (J J0 - 1 - s)^2: with one point per cell
+    it enforces the constraint against the cell's (constant) fluid content once per cell, as a
+    Q1/P0 pair does, instead of at every Gauss point, which locks Q1 elements in bending."""
     u, dQ, F, F_n, Q_n = kinematics(w, state)
     s_n = mat.s0 - ufl.div(Q_n)
     s = s_n - ufl.div(dQ)
     C_n = F_n.T * F_n
-    energy = free_energy(mat, F, s) * dx + dissipation_increment(mat, dQ, C_n, s_n, tau) * dx
+    psi_mech, psi_chem, psi_coup = free_energy_parts(mat, F, s)
+    energy = (psi_mech + psi_chem) * dx + psi_coup * (dx_coupling or dx) \
+        + dissipation_increment(mat, dQ, C_n, s_n, tau) * dx
     if ds_permeable is not None:
         n = ufl.FacetNormal(w.function_space.mesh)
         energy += mu_bar * ufl.dot(dQ, n) * ds_permeable

@@ -50,7 +50,8 @@ def build_mesh(cfg: dict, comm):
         from meshes import bilayer
 
         return bilayer.build(comm, geo["length"], geo["substrate_thickness"], geo["film_thickness"],
-                             mesh["element_size"], mesh["film_layers"], mesh["substrate_grading"])
+                             mesh["element_size"], mesh["film_layers"], mesh["substrate_grading"],
+                             film_grading=mesh["film_grading"])
     raise config.ConfigError("geometry.kind", f"unsupported kind {geo['kind']!r}")
 
 
@@ -87,12 +88,15 @@ class Problem:
 
         q = cfg["mesh"]["quadrature_degree"]
         self.dx = ufl.Measure("dx", domain=domain, metadata={"quadrature_degree": q})
+        self.dx_coupling = ufl.Measure("dx", domain=domain,
+                                       metadata={"quadrature_degree": cfg["mesh"]["coupling_quadrature_degree"]})
         self.ds = ufl.Measure("ds", domain=domain, subdomain_data=self.tm.facet_tags)
         top = self.tm.facet_names["top"]
         self.ds_top = self.ds(top)
         permeable = self.ds_top if self.loading.kind == "swelling" else None
 
-        self.pot = build(self.w, self.state, self.mat, self.tau, self.mu_bar, self.dx, permeable)
+        self.pot = build(self.w, self.state, self.mat, self.tau, self.mu_bar, self.dx, permeable,
+                         self.dx_coupling)
         self.forms = CompiledForms(self.pot)
         self.bcs, self._right_ux = self._boundary_conditions()
         self._observables()

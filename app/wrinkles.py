@@ -44,6 +44,32 @@ def wrinkle_count(x: np.ndarray, y: np.ndarray, length: float, **kw) -> float:
     return 0.5 * round(dominant_half_waves(x, y, length, **kw))
 
 
+def band_vertex(counts, eigenvalues, step: float = 0.5) -> float | None:
+    """Wrinkle count at the minimum of the dispersion curve lambda(N) sampled by several modes.
+
+    Near a wrinkling onset the eigenvalues of neighbouring wrinkle counts are nearly equal, so which
+    of them crosses zero first is decided by tiny details. The vertex of a parabola fitted to the
+    lowest eigenvalue of each count is insensitive to them; rounded to ``step`` it is the count of
+    the first crossing in the limit of a continuous spectrum. None if it cannot be fitted (fewer than
+    three distinct counts, no minimum, or the vertex outside the sampled range)."""
+    lowest: dict[float, float] = {}
+    for n, lam in zip(counts, eigenvalues):
+        if n is None or not np.isfinite(lam) or n <= 0:
+            continue
+        lowest[n] = min(lam, lowest.get(n, np.inf))
+    if len(lowest) < 3:
+        return None
+    n = np.array(sorted(lowest))
+    lam = np.array([lowest[k] for k in n])
+    a, b, _ = np.polyfit(n, lam, 2)
+    if a <= 0:
+        return None
+    vertex = -b / (2 * a)
+    if not n.min() - step <= vertex <= n.max() + step:
+        return None
+    return step * round(vertex / step)
+
+
 def circumferential_wavenumber(theta: np.ndarray, r: np.ndarray) -> int:
     """Dominant integer wavenumber n of a periodic profile r(theta) (tubes): largest |DFT| for n >= 1."""
     theta = np.asarray(theta, float)

@@ -32,15 +32,24 @@ def substrate_layer_heights(H: float, first: float, grading: float) -> np.ndarra
     return h * (H / h.sum())
 
 
+def film_layer_heights(w: float, layers: int, grading: float) -> np.ndarray:
+    """Film element heights from the interface up to the surface; with grading > 1 each layer is
+    ``grading`` times thinner than the one below, resolving the steep swelling front under the
+    permeable surface."""
+    h = grading ** -np.arange(layers, dtype=float)
+    return h * (w / h.sum())
+
+
 def build(comm, length: float, substrate_thickness: float, film_thickness: float,
           element_size: float, film_layers: int, grading: float, rank: int = 0,
-          msh_path: str | None = None) -> TaggedMesh:
+          msh_path: str | None = None, film_grading: float = 1.0) -> TaggedMesh:
     L, H, w = length, substrate_thickness, film_thickness
     nx = max(1, round(L / element_size))
-    film_h = w / film_layers
+    film_hs = film_layer_heights(w, film_layers, film_grading)
+    film_h = film_hs[0]  # the film layer at the interface
     sub_h = substrate_layer_heights(H, film_h * grading, grading)
     info = {"elements_along_length": nx, "film_layers": film_layers, "substrate_layers": len(sub_h),
-            "film_element_aspect": (L / nx) / film_h}
+            "film_element_aspect": (L / nx) / film_hs.min(), "surface_layer_height": film_hs[-1]}
     with gmsh_session(comm, "bilayer", rank) as active:
         if active:
             geo = gmsh.model.geo
@@ -53,7 +62,9 @@ def build(comm, length: float, substrate_thickness: float, film_thickness: float
             fractions[-1] = 1.0
             sub = geo.extrude([(1, base)], 0, H, 0, numElements=[1] * len(sub_h), heights=fractions,
                               recombine=True)
-            film = geo.extrude([sub[0]], 0, w, 0, numElements=[film_layers], recombine=True)
+            film_fr = list(np.cumsum(film_hs) / w)
+            film_fr[-1] = 1.0
+            film = geo.extrude([sub[0]], 0, w, 0, numElements=[1] * film_layers, heights=film_fr, recombine=True)
             geo.synchronize()
             sides = [abs(t) for t in (sub[2][1], sub[3][1], film[2][1], film[3][1])]
             left = [c for c in sides if gmsh.model.getBoundingBox(1, c)[3] < 0.5 * L]

@@ -47,7 +47,7 @@ BAD = [
     ("[geometry]\nlength = \"long\"\n", "geometry.length", "number"),
     ("[loading]\nkind = \"heating\"\n", "loading.kind", "one of"),
     ("[material.film]\nmodulus_ratio = 2.0\nshear_modulus = 0.2\n", "material.film.shear_modulus", "not both"),
-    ("[geometry]\nlength = 0.01\n", "mesh.element_size", "<= geometry.length/2"),
+    ("[geometry]\nlength = 0.005\n", "mesh.element_size", "<= geometry.length/2"),
     ("geometry = 3\n", "geometry", "table"),
 ]
 

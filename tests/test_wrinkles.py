@@ -37,3 +37,14 @@ def test_unsorted_input_and_circumferential():
     assert wrinkle_count(X[perm], y[perm], L) == 4.5
     th = np.linspace(0, 2 * np.pi, 360, endpoint=False)
     assert circumferential_wavenumber(th, 1 + 0.01 * np.cos(17 * th + 0.3)) == 17
+
+
+def test_band_vertex_finds_the_dispersion_minimum():
+    from app.wrinkles import band_vertex
+
+    counts = [16.5, 17, 17.5, 18, 18.5, 19, 19.5, 18]
+    lam = [0.02 * (n - 17.8) ** 2 - 1e-3 for n in counts]
+    lam[-1] += 0.5  # a second mode with the same count but higher eigenvalue is ignored
+    assert band_vertex(counts, lam) == 18.0
+    assert band_vertex([10, 11], [0.1, 0.2]) is None  # too few counts
+    assert band_vertex([10, 11, 12], [0.3, 0.2, 0.1]) is None  # no minimum inside the band
