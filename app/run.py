@@ -66,7 +66,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None) -> dict:
                 nneg = analyzer.inertia()[0]
                 lam = float("nan")
                 if scfg["eigen_every"] and rec.step % scfg["eigen_every"] == 0:
-                    lam = analyzer.eigenpairs(1)[0].value
+                    lam = analyzer.lambda_min(nneg)
                 rec.extra.update({"negative_eigenvalues": nneg, "lambda_min": lam})
             writer.history_row(row_of(rec))
             log.info(f"step {rec.step:5d}  t = {rec.time:10.5f} s  dt = {rec.dt:9.3e} s  "

@@ -132,6 +132,22 @@ class StabilityAnalyzer:
         pairs.sort(key=lambda e: e.value)
         return pairs
 
+    def lambda_min(self, negative_count: int) -> float:
+        """The smallest eigenvalue of K (free dofs), certified by the inertia.
+
+        Shift-invert at 0 finds the eigenvalues nearest zero; once more than the inertia's
+        ``negative_count`` of them are found, all negative ones are among them and the smallest
+        returned is lambda_min. Otherwise the request grows (up to 64 pairs)."""
+        n = negative_count + 1
+        while True:
+            values = [e.value for e in self.eigenpairs(n)]
+            found_negative = sum(v < 0 for v in values)
+            if found_negative >= negative_count and (len(values) > negative_count or n >= 64):
+                return min(values) if values else float("nan")
+            if n >= 64:
+                return float("nan")
+            n = min(2 * n + 2, 64)
+
     def _embed(self, x_free: PETSc.Vec) -> np.ndarray:
         """Free-dof vector -> local array (owned + ghost) of the full mixed space."""
         full = self._full

@@ -48,25 +48,27 @@ def band_vertex(counts, eigenvalues, step: float = 0.5) -> float | None:
     """Wrinkle count at the minimum of the dispersion curve lambda(N) sampled by several modes.
 
     Near a wrinkling onset the eigenvalues of neighbouring wrinkle counts are nearly equal, so which
-    of them crosses zero first is decided by tiny details. The vertex of a parabola fitted to the
-    lowest eigenvalue of each count is insensitive to them; rounded to ``step`` it is the count of
-    the first crossing in the limit of a continuous spectrum. None if it cannot be fitted (fewer than
-    three distinct counts, no minimum, or the vertex outside the sampled range)."""
+    of them crosses zero first is decided by tiny details. Around the count n0 with the lowest
+    eigenvalue, a parabola through the lowest eigenvalue of each count within n0 +- 2 steps (at
+    least one on each side) locates the minimum; its vertex, kept within half a step of n0 and
+    rounded to ``step``, is the count of the first crossing for a continuous spectrum. Far-away
+    counts (global modes, the other branch of the dispersion curve) are left out of the fit.
+    None if no such fit exists."""
     lowest: dict[float, float] = {}
     for n, lam in zip(counts, eigenvalues):
         if n is None or not np.isfinite(lam) or n <= 0:
             continue
         lowest[n] = min(lam, lowest.get(n, np.inf))
-    if len(lowest) < 3:
+    if not lowest:
         return None
-    n = np.array(sorted(lowest))
-    lam = np.array([lowest[k] for k in n])
-    a, b, _ = np.polyfit(n, lam, 2)
+    n0 = min(lowest, key=lowest.get)
+    near = sorted(n for n in lowest if abs(n - n0) <= 2 * step + 1e-9)
+    if len(near) < 3 or min(near) >= n0 or max(near) <= n0:
+        return None
+    a, b, _ = np.polyfit(near, [lowest[n] for n in near], 2)
     if a <= 0:
         return None
-    vertex = -b / (2 * a)
-    if not n.min() - step <= vertex <= n.max() + step:
-        return None
+    vertex = min(max(-b / (2 * a), n0 - step / 2), n0 + step / 2)
     return step * round(vertex / step)
 
 

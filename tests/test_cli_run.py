@@ -19,6 +19,8 @@ substrate_grading = 1.3
 end = 1.05
 dt_initial = 0.01
 dt_max = 0.1
+[stability]
+enabled = false
 [output]
 every = 2
 """

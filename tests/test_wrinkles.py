@@ -42,9 +42,12 @@ def test_unsorted_input_and_circumferential():
 def test_band_vertex_finds_the_dispersion_minimum():
     from app.wrinkles import band_vertex
 
-    counts = [16.5, 17, 17.5, 18, 18.5, 19, 19.5, 18]
+    counts = [16.5, 17, 17.5, 18, 18.5, 19, 19.5, 18, 0.5]
     lam = [0.02 * (n - 17.8) ** 2 - 1e-3 for n in counts]
-    lam[-1] += 0.5  # a second mode with the same count but higher eigenvalue is ignored
+    lam[-2] += 0.5  # a second mode with the same count but higher eigenvalue is ignored
+    lam[-1] = 0.01  # a global mode far from the band does not enter the fit
     assert band_vertex(counts, lam) == 18.0
+    # first crossing 9.5, neighbours asymmetric: the vertex stays within half a step
+    assert band_vertex([9.5, 10, 9, 10.5, 8.5], [-2.5e-6, 3.7e-6, 1.5e-5, 4e-5, 4.9e-5]) in (9.5, 10.0)
     assert band_vertex([10, 11], [0.1, 0.2]) is None  # too few counts
-    assert band_vertex([10, 11, 12], [0.3, 0.2, 0.1]) is None  # no minimum inside the band
+    assert band_vertex([10, 10.5, 11], [0.3, 0.2, 0.1]) is None  # minimum at the edge of the band
