@@ -77,3 +77,37 @@ def test_solver_failure_exits_1_and_keeps_history(shared_tmp):
     with open(out / "history.csv") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) >= 1 and float(rows[0]["time"]) == 0.0
+
+
+BUCKLING = """
+[geometry]
+length = 0.3
+substrate_thickness = 0.15
+[mesh]
+element_size = 0.005
+film_layers = 2
+substrate_grading = 1.25
+[time]
+end = 1.0
+dt_max = 0.05
+[output]
+fields = false
+plot = false
+"""
+
+
+def test_run_reports_gc_with_its_discretization_error(shared_tmp):
+    cfg_path, out = shared_tmp / "buckling.toml", shared_tmp / "out"
+    _write(cfg_path, BUCKLING)
+    assert cli.main(["run", str(cfg_path), "-o", str(out), "-q"]) == 0
+    crit = json.loads((out / "summary.json").read_text())["critical"]
+    est = crit["discretization_error"]
+    companions = {}
+    for study in ("time", "mesh"):
+        s = json.loads((out / "error-estimate" / study / "summary.json").read_text())
+        companions[study] = s["critical"]["growth_um"]
+        assert est[f"{study}_companion_g_c_um"] == companions[study]
+    # time: order 1 -> |g - g_2dt|; mesh: order 1.5 -> |g - g_2h| / (2^1.5 - 1)
+    assert est["time_um"] == abs(crit["growth_um"] - companions["time"])
+    assert est["mesh_um"] == abs(crit["growth_um"] - companions["mesh"]) / (2 ** 1.5 - 1)
+    assert est["total_um"] == est["time_um"] + est["mesh_um"] > 0
