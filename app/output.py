@@ -49,11 +49,12 @@ def _clean(value):
 
 
 def rewrite_summary(outdir, comm, summary: dict) -> None:
-    """Replace summary.json (rank 0, atomically) after a run's summary was extended."""
+    """Write summary.json (rank 0, atomically); collective, so every rank may read it afterwards."""
     if comm.rank == 0:
         tmp = Path(outdir) / "summary.json.tmp"
         tmp.write_text(json.dumps(_clean(summary), indent=2) + "\n")
         tmp.replace(Path(outdir) / "summary.json")
+    comm.barrier()
 
 
 class ResultWriter:
