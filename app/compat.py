@@ -88,6 +88,26 @@ def rectangle_quads(comm, p0, p1, n):
                                   cell_type=dmesh.CellType.quadrilateral)
 
 
+def vertex_to_geometry(domain) -> np.ndarray:
+    """Map from topological vertex index to geometry node index (they differ in dolfinx)."""
+    tdim = domain.topology.dim
+    domain.topology.create_connectivity(tdim, 0)
+    c2v = domain.topology.connectivity(tdim, 0)
+    x_dofmap = domain.geometry.dofmap
+    n_vertices = domain.topology.index_map(0).size_local + domain.topology.index_map(0).num_ghosts
+    out = np.full(n_vertices, -1, dtype=np.int64)
+    n_cells = domain.topology.index_map(tdim).size_local + domain.topology.index_map(tdim).num_ghosts
+    for c in range(n_cells):
+        out[c2v.links(c)] = x_dofmap.links(c)[:len(c2v.links(c))]
+    return out
+
+
+def exterior_facets(domain) -> np.ndarray:
+    fdim = domain.topology.dim - 1
+    domain.topology.create_connectivity(fdim, fdim + 1)
+    return np.asarray(dmesh.exterior_facet_indices(domain.topology), dtype=np.int32)
+
+
 def facets_with_tag(facet_tags, tag: int) -> np.ndarray:
     return facet_tags.indices[facet_tags.values == tag]
 

@@ -60,7 +60,24 @@ def _key(type_, default, rng=None, doc="", optional=False):
     return Key(type_, default, check, allowed, doc, optional)
 
 
-GEOMETRY_KINDS = ("bilayer",)
+GEOMETRY_KINDS = ("bilayer", "tube", "elliptic-tube", "msh")
+BOUNDARY_ROLES = ("permeable", "impermeable", "free", "fixed", "roller_x", "roller_y")
+WRINKLE_MEASURES = ("auto", "along", "around")
+
+# Kind-dependent defaults (geometry and mesh keys left unset by the user). A geometry key a kind
+# does not use must stay unset: setting it is an error that names the kind's keys.
+KIND_DEFAULTS = {
+    "bilayer": {"geometry": {"length": 2.0, "substrate_thickness": 0.5, "film_thickness": 0.01},
+                "mesh": {"element_size": 0.004, "film_layers": 8}},
+    "tube": {"geometry": {"outer_radius": 1.0, "substrate_thickness": 0.2, "film_thickness": 0.02},
+             "mesh": {"element_size": 0.01, "film_layers": 4}},
+    "elliptic-tube": {"geometry": {"outer_radius": 1.0, "substrate_thickness": 0.2, "film_thickness": 0.02,
+                                   "aspect_ratio": 1.0},
+                      "mesh": {"element_size": 0.01, "film_layers": 4}},
+    "msh": {"geometry": {"file": None, "layers": None, "boundaries": None, "wrinkles": "auto"},
+            "mesh": {}},
+}
+KIND_GEOMETRY_KEYS = {kind: set(d["geometry"]) for kind, d in KIND_DEFAULTS.items()}
 LOADING_KINDS = ("swelling", "compression")
 
 MATERIAL_KEYS = {
@@ -75,13 +92,19 @@ MATERIAL_KEYS = {
 SCHEMA: dict[str, dict[str, Key] | dict] = {
     "geometry": {
         "kind": _key(str, "bilayer", _one_of(*GEOMETRY_KINDS)),
-        "length": _key(float, 2.0, _gt(0), "L [mm]"),
-        "substrate_thickness": _key(float, 0.5, _gt(0), "H [mm]"),
-        "film_thickness": _key(float, 0.01, _gt(0), "w [mm]"),
+        "length": _key(float, None, _gt(0), "L [mm] (bilayer)", optional=True),
+        "substrate_thickness": _key(float, None, _gt(0), "H [mm]", optional=True),
+        "film_thickness": _key(float, None, _gt(0), "w [mm]", optional=True),
+        "outer_radius": _key(float, None, _gt(0), "R [mm] (tubes)", optional=True),
+        "aspect_ratio": _key(float, None, _in_closed(1.0, 10.0), "a/b of the elliptic passage", optional=True),
+        "file": _key(str, None, None, "msh: path of a 2D gmsh .msh file (quadrilaterals)", optional=True),
+        "layers": _key(dict, None, None, "msh: cell physical group -> material name", optional=True),
+        "boundaries": _key(dict, None, None, "msh: facet physical group -> boundary role", optional=True),
+        "wrinkles": _key(str, None, _one_of(*WRINKLE_MEASURES), "msh: how wrinkles are counted", optional=True),
     },
     "mesh": {
-        "element_size": _key(float, 0.004, _gt(0), "element length along the film surface [mm]"),
-        "film_layers": _key(int, 8, _in_closed(1, 200), "element layers through the film"),
+        "element_size": _key(float, None, _gt(0), "element length along the film surface [mm]", optional=True),
+        "film_layers": _key(int, None, _in_closed(1, 200), "element layers through the film", optional=True),
         "substrate_grading": _key(float, 1.15, _in_closed(1.0, 3.0),
                                   "element-height ratio away from the film; 1 = uniform"),
         "film_grading": _key(float, 1.0, _in_closed(1.0, 4.0),
@@ -93,6 +116,8 @@ SCHEMA: dict[str, dict[str, Key] | dict] = {
     },
     "material": {
         **MATERIAL_KEYS,
+        "layers": _key(dict, None, None, "msh: more named layer materials, each like [material.film]",
+                       optional=True),
         "film": {
             "modulus_ratio": _key(float, 8.0, _gt(0), "gamma_f/gamma_s", optional=True),
             **{k: Key(v.type, None, v.check, v.allowed, v.doc, True) for k, v in MATERIAL_KEYS.items()},
@@ -168,8 +193,25 @@ def resolve(user: dict, overrides: list[str] | None = None) -> dict:
     for item in overrides or []:
         key, value = parse_override(item)
         set_dotted(cfg, key, value)
+    _apply_kind_defaults(cfg)
     validate(cfg)
     return cfg
+
+
+def _apply_kind_defaults(cfg: dict) -> None:
+    kind = cfg["geometry"].get("kind")
+    if kind not in KIND_DEFAULTS:
+        return  # validate() reports the bad kind
+    for name, spec in SCHEMA["geometry"].items():
+        if name == "kind" or isinstance(spec, dict):
+            continue
+        if name not in KIND_GEOMETRY_KEYS[kind] and cfg["geometry"].get(name) is not None:
+            raise ConfigError(f"geometry.{name}", f"is not used by geometry.kind = {kind!r}; its keys are: "
+                              + ", ".join(sorted(KIND_GEOMETRY_KEYS[kind])))
+    for table in ("geometry", "mesh"):
+        for name, value in KIND_DEFAULTS[kind][table].items():
+            if cfg[table].get(name) is None:
+                cfg[table][name] = copy.deepcopy(value)
 
 
 def parse_override(item: str) -> tuple[str, Any]:
@@ -191,14 +233,25 @@ def set_dotted(cfg: dict, key: str, value: Any) -> None:
     spec: Any = SCHEMA
     node = cfg
     for i, part in enumerate(parts):
+        if isinstance(spec, Key) and spec.type is dict:  # free-form table: geometry.boundaries.NAME
+            table = node.get(parts[i - 1]) or {}
+            node[parts[i - 1]] = table
+            _set_nested(table, parts[i:], value)
+            return
         if not isinstance(spec, dict) or part not in spec:
             raise ConfigError(key, f"unknown key; known keys here: {_known(spec)}")
         spec = spec[part]
-        if i < len(parts) - 1:
+        if i < len(parts) - 1 and not (isinstance(spec, Key) and spec.type is dict):
             node = node[part]
     if isinstance(spec, dict):
         raise ConfigError(key, "is a table, set one of its keys: " + _known(spec))
     node[parts[-1]] = value
+
+
+def _set_nested(table: dict, parts: list[str], value: Any) -> None:
+    for part in parts[:-1]:
+        table = table.setdefault(part, {})
+    table[parts[-1]] = value
 
 
 def _known(spec) -> str:
@@ -218,7 +271,7 @@ def _merge(cfg: dict, user: dict, schema: dict, prefix: str) -> None:
                 raise ConfigError(key, "must be a table")
             _merge(cfg[name], value, spec, prefix=key + ".")
         else:
-            if isinstance(value, dict):
+            if isinstance(value, dict) and spec.type is not dict:
                 raise ConfigError(key, f"must be a {spec.type.__name__}, not a table")
             cfg[name] = value
 
@@ -243,6 +296,9 @@ def _check_value(key: str, spec: Key, value: Any) -> Any:
     elif spec.type is str:
         if not isinstance(value, str):
             raise ConfigError(key, f"must be a string, got {value!r}")
+    elif spec.type is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(key, f"must be a table, got {value!r}")
     if spec.check is not None and not spec.check(value):
         raise ConfigError(key, f"= {value!r} is out of range; allowed: {spec.allowed}")
     return value
@@ -265,10 +321,27 @@ def validate(cfg: dict) -> None:
         raise ConfigError("material.film.shear_modulus",
                           "set either material.film.shear_modulus or material.film.modulus_ratio, not both "
                           "(use --set material.film.modulus_ratio=... alone, or remove it from the file)")
-    if mesh["element_size"] > geo["length"] / 2:
+    kind = geo["kind"]
+    if kind == "bilayer" and mesh["element_size"] > geo["length"] / 2:
         raise ConfigError("mesh.element_size",
                           f"= {mesh['element_size']:g} is too coarse; allowed: <= geometry.length/2 "
                           f"= {geo['length'] / 2:g}")
+    if kind in ("tube", "elliptic-tube"):
+        R, H, w = geo["outer_radius"], geo["substrate_thickness"], geo["film_thickness"]
+        if H + w >= R:
+            raise ConfigError("geometry.substrate_thickness",
+                              f"= {H:g}: substrate + film ({H + w:g} mm) must be thinner than "
+                              f"geometry.outer_radius = {R:g} mm; allowed: < {R - w:g}")
+        if mesh["element_size"] > (R - H - w) / 2:
+            raise ConfigError("mesh.element_size", f"= {mesh['element_size']:g} is too coarse; allowed: "
+                              f"<= passage radius/2 = {(R - H - w) / 2:g}")
+    if kind == "tube" and geo.get("aspect_ratio") not in (None, 1.0):
+        raise ConfigError("geometry.aspect_ratio", "is for geometry.kind = 'elliptic-tube'")
+    if kind == "msh":
+        _validate_msh(cfg)
+    if cfg["loading"]["kind"] == "compression" and kind != "bilayer":
+        raise ConfigError("loading.kind", "'compression' needs geometry.kind = 'bilayer'; allowed for "
+                          f"{kind!r}: 'swelling'")
     if time["dt_initial"] > time["dt_max"]:
         raise ConfigError("time.dt_initial", f"= {time['dt_initial']:g} must be <= time.dt_max = {time['dt_max']:g}")
     if time["dt_min"] > time["dt_initial"]:
@@ -277,17 +350,62 @@ def validate(cfg: dict) -> None:
         raise ConfigError("time.dt_initial", f"= {time['dt_initial']:g} must be <= time.end = {time['end']:g}")
 
 
+def _validate_msh(cfg: dict) -> None:
+    geo = cfg["geometry"]
+    if not geo.get("file"):
+        raise ConfigError("geometry.file", "must name a .msh file for geometry.kind = 'msh'")
+    layers, boundaries = geo.get("layers"), geo.get("boundaries")
+    if not layers:
+        raise ConfigError("geometry.layers", "must map cell physical groups to materials, e.g. "
+                          "{ film = \"film\", substrate = \"substrate\" }")
+    known = {"film", "substrate"} | set((cfg["material"].get("layers") or {}))
+    for group, mat in layers.items():
+        if mat not in known:
+            raise ConfigError(f"geometry.layers.{group}", f"= {mat!r} is not a material; allowed: "
+                              + ", ".join(sorted(known)) + " (define more under [material.layers.NAME])")
+    if not boundaries:
+        raise ConfigError("geometry.boundaries", "must map facet physical groups to roles: "
+                          + ", ".join(BOUNDARY_ROLES))
+    for group, role in boundaries.items():
+        if role not in BOUNDARY_ROLES:
+            raise ConfigError(f"geometry.boundaries.{group}", f"= {role!r}; allowed: " + ", ".join(BOUNDARY_ROLES))
+    if "permeable" not in boundaries.values():
+        raise ConfigError("geometry.boundaries", "needs at least one 'permeable' boundary (where fluid enters)")
+    for name, table in (cfg["material"].get("layers") or {}).items():
+        if not isinstance(table, dict):
+            raise ConfigError(f"material.layers.{name}", "must be a table of material keys")
+        for k, v in table.items():
+            spec = SCHEMA["material"]["film"].get(k)
+            if spec is None:
+                raise ConfigError(f"material.layers.{name}.{k}", "unknown key; known keys here: "
+                                  + _known(SCHEMA["material"]["film"]))
+            table[k] = _check_value(f"material.layers.{name}.{k}", spec, v)
+
+
+def layer_parameters(cfg: dict, name: str) -> dict:
+    """Material parameters of a named layer: substrate values with that layer's overrides."""
+    if name == "substrate":
+        return substrate_parameters(cfg)
+    if name == "film":
+        return film_overrides(cfg)
+    return _with_overrides(cfg, cfg["material"]["layers"][name])
+
+
+def _with_overrides(cfg: dict, table: dict) -> dict:
+    mat = cfg["material"]
+    out = {k: mat[k] for k in MATERIAL_KEYS}
+    for k in MATERIAL_KEYS:
+        if table.get(k) is not None:
+            out[k] = table[k]
+    if table.get("shear_modulus") is None:
+        ratio = table.get("modulus_ratio")
+        out["shear_modulus"] = mat["shear_modulus"] * (1.0 if ratio is None else ratio)
+    return out
+
+
 def film_overrides(cfg: dict) -> dict:
     """The film's material parameters: substrate values with the film's overrides applied."""
-    mat = cfg["material"]
-    film = {k: mat[k] for k in MATERIAL_KEYS}
-    for k in MATERIAL_KEYS:
-        if mat["film"].get(k) is not None:
-            film[k] = mat["film"][k]
-    if mat["film"].get("shear_modulus") is None:
-        ratio = mat["film"].get("modulus_ratio")
-        film["shear_modulus"] = mat["shear_modulus"] * (1.0 if ratio is None else ratio)
-    return film
+    return _with_overrides(cfg, cfg["material"]["film"])
 
 
 def substrate_parameters(cfg: dict) -> dict:

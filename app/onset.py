@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from app.wrinkles import band_vertex, wrinkle_count
+from app.wrinkles import band_vertex, mode_wrinkle_count
 
 BAND_MODES = 8  # eigenpairs sampled at the unstable end to locate the minimum of lambda(N)
 
@@ -45,14 +45,6 @@ class Crossing:
                 "negative_eigenvalues": self.negative_eigenvalues, "modes": self.modes,
                 "bisection_solves": self.bisection_solves,
                 "discretization_error": None}  # filled by stability.error_estimate / hydrobuckle converge
-
-
-def mode_wrinkle_count(problem, mode: np.ndarray) -> float:
-    """Wrinkle count of a mixed-space mode array (bilayer: u_y along the top surface)."""
-    from app.wrinkles import surface_profile
-
-    x, _, uy = surface_profile(problem, mode, "top", component=1)
-    return wrinkle_count(x, uy, problem.cfg["geometry"]["length"])
 
 
 def locate_crossing(stepper, analyzer, snap_stable, snap_unstable, base_count: int, tol: float,
@@ -93,7 +85,8 @@ def locate_crossing(stepper, analyzer, snap_stable, snap_unstable, base_count: i
     counts = [mode_wrinkle_count(p, e.vector) for e in pairs_hi]
     modes = [{"eigenvalue": e.value, "wrinkle_count": n} for e, n in zip(pairs_hi, counts)][:n_modes]
     first = counts[min(base_count, len(counts) - 1)]
-    vertex = band_vertex(counts[base_count:], [e.value for e in pairs_hi[base_count:]])
+    step = 1.0 if p.geo.wrinkles == "around" else 0.5
+    vertex = band_vertex(counts[base_count:], [e.value for e in pairs_hi[base_count:]], step=step)
     crossing = Crossing(
         time=t_c, growth_mm=g_c, applied_strain=p.loading.applied_strain(t_c), mu_bar=p.loading.mu_bar(t_c),
         wrinkle_count=vertex if vertex is not None else first, first_mode_wrinkle_count=first,

@@ -13,6 +13,7 @@ import math
 import shutil
 from pathlib import Path
 
+import numpy as np
 import ufl
 
 from app import compat, config
@@ -149,10 +150,21 @@ class ResultWriter:
             f.write_function(mode, crossing.time)
             f.write_function(base, crossing.time)
         polys = _gather_cells(problem, base.x.array, mode.x.array)
+        from app.wrinkles import along_profile, around_profile, boundary_displacement
+
+        coords, disp = boundary_displacement(problem, crossing.mode, problem.geo.facets_with_role("permeable"))
+        if problem.geo.wrinkles == "around":
+            _, radial, _, theta = around_profile(coords, disp)
+            profile = (np.degrees(theta), radial / (np.abs(radial).max() or 1.0), "angle around the passage [deg]",
+                       "normal mode displacement")
+        else:
+            t, un, _ = along_profile(coords, disp)
+            profile = (t - t.min(), un / (np.abs(un).max() or 1.0), "position along the surface [mm]",
+                       "normal mode displacement")
         if self.rank0 and self.cfg["output"]["plot"]:
             from app.plots import mode_plot
 
-            mode_plot(polys, self.cfg, crossing, self.outdir / "mode.png")
+            mode_plot(polys, profile, problem.geo, crossing, self.outdir / "mode.png")
 
     # --- summary and plot ------------------------------------------------------------------
 

@@ -28,36 +28,50 @@ def history_plot(rows: list[dict], path) -> None:
     plt.close(fig)
 
 
-def mode_plot(polys, cfg: dict, crossing, path) -> None:
-    """Surface profile of the mode, and the near-surface region deformed by the critical state with
-    the mode superposed (amplified), as in the paper's mode figures."""
+def mode_plot(polys, profile, geo, crossing, path) -> None:
+    """The mode along the permeable surface, and the body deformed by the critical state with the
+    mode superposed (amplified), as in the paper's mode figures: the near-surface band of a bilayer,
+    the whole cross-section of a tube."""
     import numpy as np
     from matplotlib.collections import PolyCollection
 
     X, U, M, layer = polys
-    geo = cfg["geometry"]
-    w, H = geo["film_thickness"], geo["substrate_thickness"]
-    top = H + w
-    keep = X[:, :, 1].min(axis=1) >= top - 6 * w
-    amp = 0.6 * w
+    x_prof, y_prof, xlabel, ylabel = profile
+    around = geo.wrinkles == "around"
+    size = np.ptp(X[:, :, 0]) if not around else max(np.ptp(X[:, :, 0]), np.ptp(X[:, :, 1]))
+    keep = np.ones(len(X), dtype=bool)
+    if geo.plot_band is not None:
+        top = X[:, :, 1].max()
+        keep = X[:, :, 1].min(axis=1) >= top - geo.plot_band
+        amp = 0.1 * geo.plot_band
+    else:
+        amp = 0.03 * size
     shapes = X + U + amp * M
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 5.5), gridspec_kw={"height_ratios": [1, 1.4]})
-    surf = np.isclose(X[:, :, 1], top)
-    xs, ys = X[:, :, 0][surf], M[:, :, 1][surf]
-    order = np.argsort(xs)
-    ax1.plot(xs[order], ys[order], "-", color="C0", lw=1)
-    ax1.set_ylabel("mode $u_y$ on the surface")
+    fig = plt.figure(figsize=(9, 8.5 if around else 5.5))
+    if around:
+        ax1 = fig.add_subplot(2, 1, 1)
+        ax2 = fig.add_subplot(2, 1, 2)
+    else:
+        ax1, ax2 = fig.subplots(2, 1, gridspec_kw={"height_ratios": [1, 1.4]})
+    ax1.plot(x_prof, y_prof, "-", color="C0", lw=1)
+    if around:
+        ax1.plot(x_prof, envelope(x_prof, y_prof), "-", color="C3", lw=1.2, label="local amplitude")
+        ax1.legend(fontsize=8, loc="upper right")
+    ax1.set_xlabel(xlabel, fontsize=9)
+    ax1.set_ylabel(ylabel, fontsize=9)
     ax1.set_title(f"g_c = {1e3 * crossing.growth_mm:.3f} um, N_c = {crossing.wrinkle_count:g}, "
                   f"t_c = {crossing.time:.4f} s; first critical mode shown (N = "
                   f"{crossing.first_mode_wrinkle_count:g})", fontsize=10)
     ax1.grid(alpha=0.3)
     colors = np.where(layer[keep] == 1, "#c44e52", "#8fb1d9")
-    coll = PolyCollection(shapes[keep], facecolors=colors, edgecolors="k", linewidths=0.1)
+    coll = PolyCollection(shapes[keep], facecolors=colors, edgecolors="k", linewidths=0.05 if around else 0.1)
     ax2.add_collection(coll)
     ax2.autoscale_view()
+    if around:
+        ax2.set_aspect("equal")
     ax2.set_xlabel("x [mm]")
     ax2.set_ylabel("y [mm]")
-    ax2.set_title("film (red) and substrate (blue) near the surface, mode amplified", fontsize=9)
+    ax2.set_title("film (red) and substrate (blue), mode amplified", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
@@ -88,3 +102,17 @@ def convergence_plot(rows: list[dict], report: dict, path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def envelope(angle_deg, values):
+    """Local wrinkle amplitude along a closed surface: modulus of the analytic signal (Hilbert
+    transform) of the profile resampled at even angles; shows where wrinkles fade."""
+    import numpy as np
+    from scipy.signal import hilbert
+
+    order = np.argsort(angle_deg)
+    a, v = np.asarray(angle_deg)[order], np.asarray(values)[order]
+    grid = np.linspace(-180.0, 180.0, 2048, endpoint=False)
+    even = np.interp(grid, a, v, period=360.0)
+    env = np.abs(hilbert(even - even.mean()))
+    return np.interp(angle_deg, grid, env, period=360.0)

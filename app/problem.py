@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import ufl
 
-from app import compat, config
+from app import compat, config, geometry
+from app.geometry import GeometrySetup
 from app.material import Hydrogel
 from app.potential import CompiledForms, MaterialFields, build
 
@@ -43,29 +44,18 @@ class Loading:
         return [self.ramp_time] if self.kind == "swelling" else []
 
 
-def build_mesh(cfg: dict, comm):
-    """The tagged mesh for ``geometry.kind``."""
-    geo, mesh = cfg["geometry"], cfg["mesh"]
-    if geo["kind"] == "bilayer":
-        from meshes import bilayer
-
-        return bilayer.build(comm, geo["length"], geo["substrate_thickness"], geo["film_thickness"],
-                             mesh["element_size"], mesh["film_layers"], mesh["substrate_grading"],
-                             film_grading=mesh["film_grading"])
-    raise config.ConfigError("geometry.kind", f"unsupported kind {geo['kind']!r}")
-
-
-def layer_materials(cfg: dict) -> dict[str, Hydrogel]:
-    return {"film": Hydrogel.from_dict(config.film_overrides(cfg)),
-            "substrate": Hydrogel.from_dict(config.substrate_parameters(cfg))}
+def layer_materials(cfg: dict, names=("film", "substrate")) -> dict[str, Hydrogel]:
+    """Hydrogel parameters of each named material (film, substrate, [material.layers.*])."""
+    return {name: Hydrogel.from_dict(config.layer_parameters(cfg, name)) for name in names}
 
 
 class Problem:
     """The discrete incremental minimization problem of one configuration."""
 
-    def __init__(self, cfg: dict, comm, tagged_mesh=None):
+    def __init__(self, cfg: dict, comm, setup: GeometrySetup | None = None):
         self.cfg, self.comm = cfg, comm
-        self.tm = tagged_mesh if tagged_mesh is not None else build_mesh(cfg, comm)
+        self.geo = setup if setup is not None else geometry.build(cfg, comm)
+        self.tm = self.geo.tm
         domain = self.tm.mesh
         self.domain = domain
         tdim = domain.topology.dim
@@ -77,13 +67,15 @@ class Problem:
         self.V_u, self.u_dofs = compat.collapse(self.W.sub(0))
         self.V_q, self.q_dofs = compat.collapse(self.W.sub(1))
 
-        self.materials = layer_materials(cfg)
+        self.materials = layer_materials(cfg, sorted(set(self.geo.layers.values())))
         self.mat = self._material_fields()
 
         self.tau = compat.Constant(domain, compat.ScalarType(cfg["time"]["dt_initial"]))
         lo = cfg["loading"]
-        self.loading = Loading(lo["kind"], self.materials["film"].mu0, lo["chemical_potential"], lo["ramp_time"],
-                               cfg["time"]["end"], lo["compression_strain"], cfg["geometry"]["length"])
+        self.surface_material = self._surface_material()
+        self.loading = Loading(lo["kind"], self.materials[self.surface_material].mu0, lo["chemical_potential"],
+                               lo["ramp_time"], cfg["time"]["end"], lo["compression_strain"],
+                               cfg["geometry"].get("length") or 0.0)
         self.mu_bar = compat.Constant(domain, compat.ScalarType(self.loading.mu_bar(0.0)))
 
         q = cfg["mesh"]["quadrature_degree"]
@@ -91,12 +83,12 @@ class Problem:
         self.dx_coupling = ufl.Measure("dx", domain=domain,
                                        metadata={"quadrature_degree": cfg["mesh"]["coupling_quadrature_degree"]})
         self.ds = ufl.Measure("ds", domain=domain, subdomain_data=self.tm.facet_tags)
-        top = self.tm.facet_names["top"]
-        self.ds_top = self.ds(top)
-        permeable = self.ds_top if self.loading.kind == "swelling" else None
+        permeable = [self.tm.facet_names[g] for g in self.geo.facets_with_role("permeable")]
+        self.ds_permeable = self.ds(tuple(permeable))
+        swelling = self.loading.kind == "swelling"
 
-        self.pot = build(self.w, self.state, self.mat, self.tau, self.mu_bar, self.dx, permeable,
-                         self.dx_coupling)
+        self.pot = build(self.w, self.state, self.mat, self.tau, self.mu_bar, self.dx,
+                         self.ds_permeable if swelling else None, self.dx_coupling)
         self.forms = CompiledForms(self.pot)
         self.bcs, self._right_ux = self._boundary_conditions()
         self._observables()
@@ -110,31 +102,57 @@ class Problem:
         for name in names:
             f = compat.Function(V0)
             f.name = name
-            for layer, mat in self.materials.items():
-                value = mat.s0 if name == "s0" else getattr(mat, name)
-                f.x.array[self.tm.cells(layer)] = value
+            for group, mat_name in self.geo.layers.items():
+                mat = self.materials[mat_name]
+                f.x.array[self.tm.cells(group)] = mat.s0 if name == "s0" else getattr(mat, name)
             fields[name] = f
         return MaterialFields(**fields)
 
+    def _surface_material(self) -> str:
+        """The material under the permeable surface (the film): the ramp starts at its mu0."""
+        tdim = self.domain.topology.dim
+        f2c = self.domain.topology.connectivity(tdim - 1, tdim)
+        n_owned = compat.num_owned_cells(self.domain)
+        group_of_cell = {}
+        for group in self.geo.layers:
+            for c in self.tm.cells(group):
+                group_of_cell[int(c)] = group
+        counts: dict[str, int] = {}
+        for g in self.geo.facets_with_role("permeable"):
+            for f in self.tm.facets(g):
+                for c in f2c.links(f):
+                    if c < n_owned and int(c) in group_of_cell:
+                        name = self.geo.layers[group_of_cell[int(c)]]
+                        counts[name] = counts.get(name, 0) + 1
+        totals = self.comm.allreduce(counts, op=_merge_counts())
+        return max(sorted(totals), key=lambda k: totals[k]) if totals else "film"
+
     def _boundary_conditions(self):
         fdim = self.domain.topology.dim - 1
-        tm = self.tm
-        side = np.concatenate([tm.facets("left"), tm.facets("right")])
+        tm, geo = self.tm, self.geo
+        Wu = self.W.sub(0)
+
+        def facets(*roles):
+            groups = geo.facets_with_role(*roles)
+            return np.unique(np.concatenate([tm.facets(g) for g in groups])) if groups else np.empty(0, np.int32)
+
         bcs = []
-        bc, _ = compat.dirichlet_zero_on_facets(self.W.sub(0).sub(0), tm.facets("left"), fdim)
-        bcs.append(bc)
-        bc, g_right = compat.dirichlet_function_on_facets(self.W.sub(0).sub(0), tm.facets("right"), fdim)
-        bcs.append(bc)
-        bc, _ = compat.dirichlet_zero_on_facets(self.W.sub(0).sub(1), tm.facets("bottom"), fdim)
-        bcs.append(bc)
+        g_right = None
+        compressed = "right" if self.loading.kind == "compression" else None
+        for comp, roles in ((0, ("roller_x", "fixed")), (1, ("roller_y", "fixed"))):
+            groups = [g for g in geo.facets_with_role(*roles) if not (comp == 0 and g == compressed)]
+            if groups:
+                fs = np.unique(np.concatenate([tm.facets(g) for g in groups]))
+                bcs.append(compat.dirichlet_zero_on_facets(Wu.sub(comp), fs, fdim)[0])
+        if compressed:
+            bc, g_right = compat.dirichlet_function_on_facets(Wu.sub(0), tm.facets(compressed), fdim)
+            bcs.append(bc)
         if self.loading.kind == "swelling":
-            no_flux = np.concatenate([side, tm.facets("bottom")])
+            no_flux = np.setdiff1d(compat.exterior_facets(self.domain), facets("permeable"))
         else:  # diffusion switched off: every flux dof is zero, s stays s0
-            num_facets = self.domain.topology.index_map(fdim).size_local + \
-                self.domain.topology.index_map(fdim).num_ghosts
-            no_flux = np.arange(num_facets, dtype=np.int32)
-        bc, _ = compat.dirichlet_zero_on_facets(self.W.sub(1), np.unique(no_flux), fdim)
-        bcs.append(bc)
+            imap = self.domain.topology.index_map(fdim)
+            no_flux = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+        bcs.append(compat.dirichlet_zero_on_facets(self.W.sub(1), no_flux.astype(np.int32), fdim)[0])
         return bcs, g_right
 
     def _observables(self):
@@ -142,10 +160,26 @@ class Problem:
         _, dQ = ufl.split(self.w)
         n = ufl.FacetNormal(self.domain)
         one = compat.Constant(self.domain, compat.ScalarType(1.0))
-        self.top_length = compat.assemble_scalar(compat.form(one * self.ds_top), self.comm)
-        self._growth_form = compat.form(u_n[1] * self.ds_top)
+        self.surface_length = compat.assemble_scalar(compat.form(one * self.ds_permeable), self.comm)
+        self._growth_form = compat.form(ufl.dot(u_n, n) * self.ds_permeable)
         self._fluid_form = compat.form((self.mat.s0 - ufl.div(Q_n)) * self.dx)
-        self._influx_form = compat.form(-ufl.dot(dQ, n) * self.ds_top)
+        self._influx_form = compat.form(-ufl.dot(dQ, n) * self.ds_permeable)
+        self._growth_dof = None
+        if self.geo.growth == "vertex":
+            self._growth_dof = self._locate_point_dofs(self.geo.growth_point)
+
+    def _locate_point_dofs(self, point) -> np.ndarray | None:
+        """Indices in W of (u_x, u_y) at the owned mesh node at ``point`` (None on other ranks)."""
+        X = self.V_u.tabulate_dof_coordinates()[:, :2]
+        n_owned = self.V_u.dofmap.index_map.size_local
+        d = np.linalg.norm(X[:n_owned] - np.asarray(point), axis=1)
+        i = int(np.argmin(d)) if n_owned else -1
+        best = self.comm.allreduce(float(d[i]) if n_owned else np.inf, op=_mpi_min())
+        if best > 1e-8:
+            raise RuntimeError(f"no mesh node at the growth point {point} (nearest {best:.3g} mm away)")
+        if n_owned and d[i] == best:
+            return self.u_dofs[[2 * i, 2 * i + 1]]
+        return None
 
     # --- time-dependent data ---------------------------------------------------------------
 
@@ -153,13 +187,21 @@ class Problem:
         """Loading at time t for a step of size tau."""
         self.tau.value = tau
         self.mu_bar.value = self.loading.mu_bar(t)
-        self._right_ux.x.array[:] = -self.loading.applied_strain(t) * self.loading.length
+        if self._right_ux is not None:
+            self._right_ux.x.array[:] = -self.loading.applied_strain(t) * self.loading.length
 
     # --- observables of the converged state ------------------------------------------------
 
     def growth(self) -> float:
-        """Mean vertical displacement of the top surface (the paper's growth) [mm]."""
-        return compat.assemble_scalar(self._growth_form, self.comm) / self.top_length
+        """The paper's growth [mm]: mean displacement of the permeable surface along the body's outward
+        normal, or the inward displacement of one point (elliptic passage: minor-axis vertex)."""
+        if self.geo.growth == "vertex":
+            local = 0.0
+            if self._growth_dof is not None:
+                u = self.state.x.array[self._growth_dof]
+                local = float(np.dot(u, self.geo.growth_direction))
+            return self.comm.allreduce(local)
+        return compat.assemble_scalar(self._growth_form, self.comm) / self.surface_length
 
     def fluid_volume(self) -> float:
         """Integral of the fluid content s over the reference domain [mm^2 per unit depth]."""
@@ -182,3 +224,21 @@ class Problem:
 
     def cells(self) -> int:
         return compat.num_global_cells(self.domain)
+
+
+def _merge_counts():
+    from mpi4py import MPI
+
+    def merge(a, b, datatype=None):
+        out = dict(a)
+        for k, v in b.items():
+            out[k] = out.get(k, 0) + v
+        return out
+
+    return MPI.Op.Create(merge, commute=True)
+
+
+def _mpi_min():
+    from mpi4py import MPI
+
+    return MPI.MIN

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from app import compat
+
 
 def dominant_half_waves(x: np.ndarray, y: np.ndarray, length: float, max_half_waves: int | None = None,
                         resolution: float = 0.02) -> float:
@@ -72,34 +74,66 @@ def band_vertex(counts, eigenvalues, step: float = 0.5) -> float | None:
     return step * round(vertex / step)
 
 
-def circumferential_wavenumber(theta: np.ndarray, r: np.ndarray) -> int:
-    """Dominant integer wavenumber n of a periodic profile r(theta) (tubes): largest |DFT| for n >= 1."""
+def circumferential_wavenumber(theta: np.ndarray, r: np.ndarray, weights: np.ndarray | None = None) -> int:
+    """Dominant integer wavenumber n >= 1 of a periodic profile r(theta): the largest Fourier amplitude,
+    with quadrature weights for unevenly spaced samples (default: even spacing)."""
     theta = np.asarray(theta, float)
-    r = np.asarray(r, float) - np.mean(r)
+    r = np.asarray(r, float)
+    wts = np.ones_like(r) if weights is None else np.asarray(weights, float)
+    r = r - np.sum(wts * r) / np.sum(wts)
     n_max = max(2, len(theta) // 3)
-    amps = [abs(np.sum(r * np.exp(-1j * n * theta))) for n in range(1, n_max + 1)]
+    amps = [abs(np.sum(wts * r * np.exp(-1j * n * theta))) for n in range(1, n_max + 1)]
     return int(np.argmax(amps)) + 1
 
 
-def surface_profile(problem, mode_array: np.ndarray, facet_name: str = "top", component: int = 1):
-    """Gather (x, value) of one displacement component of a mixed-space array along a boundary.
-
-    Returns sorted numpy arrays on every rank (the boundary is small)."""
-    from app import compat
-
+def boundary_displacement(problem, array: np.ndarray, groups: list[str]):
+    """(coordinates (N, 2), displacement (N, 2)) at the nodes on facet groups, gathered on every
+    rank, one row per node. ``array`` is a mixed-space array (a state or a mode)."""
     p = problem
-    sub = p.W.sub(0).sub(component)
-    V, dofs_in_W = compat.collapse(sub)
+    V, dofs_in_W = p.V_u, p.u_dofs
     fdim = p.domain.topology.dim - 1
-    facets = p.tm.facets(facet_name)
-    local = compat.locate_dofs_on_facets(V, fdim, facets)
+    facets = np.unique(np.concatenate([p.tm.facets(g) for g in groups])) if groups else np.empty(0, np.int32)
+    blocks = compat.locate_dofs_on_facets(V, fdim, facets)
     n_owned = V.dofmap.index_map.size_local
-    local = local[local < n_owned]
-    coords = V.tabulate_dof_coordinates()[local]
-    values = mode_array[dofs_in_W[local]]
-    data = p.comm.allgather((coords[:, 0].copy(), coords[:, 1].copy(), values.copy()))
-    x = np.concatenate([d[0] for d in data])
-    yc = np.concatenate([d[1] for d in data])
-    v = np.concatenate([d[2] for d in data])
-    order = np.argsort(x)
-    return x[order], yc[order], v[order]
+    blocks = blocks[blocks < n_owned]
+    coords = V.tabulate_dof_coordinates()[blocks, :2]
+    values = np.stack([array[dofs_in_W[2 * blocks]], array[dofs_in_W[2 * blocks + 1]]], axis=-1)
+    data = p.comm.allgather((coords, values))
+    return np.concatenate([d[0] for d in data]), np.concatenate([d[1] for d in data])
+
+
+def along_profile(coords: np.ndarray, disp: np.ndarray):
+    """Position along an open, nearly straight surface, the displacement normal to it, and its length."""
+    centre = coords.mean(axis=0)
+    _, _, vt = np.linalg.svd(coords - centre, full_matrices=False)
+    tangent, normal = vt[0], vt[1]
+    t = (coords - centre) @ tangent
+    order = np.argsort(t)
+    return t[order], (disp @ normal)[order], float(t.max() - t.min())
+
+
+def around_profile(coords: np.ndarray, disp: np.ndarray, centre=None):
+    """Arc-length phase (0..2 pi), radial displacement and quadrature weights along a closed surface."""
+    c = coords.mean(axis=0) if centre is None else np.asarray(centre)
+    rel = coords - c
+    theta = np.arctan2(rel[:, 1], rel[:, 0])
+    order = np.argsort(theta)
+    rel, disp = rel[order], disp[order]
+    radial = np.sum(disp * rel, axis=1) / np.linalg.norm(rel, axis=1)
+    seg = np.linalg.norm(np.roll(rel, -1, axis=0) - rel, axis=1)  # closing segment included
+    s = np.concatenate([[0.0], np.cumsum(seg[:-1])])
+    total = seg.sum()
+    weights = 0.5 * (seg + np.roll(seg, 1))
+    return 2 * np.pi * s / total, radial, weights, theta[order]
+
+
+def mode_wrinkle_count(problem, mode: np.ndarray) -> float:
+    """Wrinkle count of a mode on the permeable surface: half-waves/2 along an open surface (bilayer),
+    integer wavenumber around a closed one (tube)."""
+    groups = problem.geo.facets_with_role("permeable")
+    coords, disp = boundary_displacement(problem, mode, groups)
+    if problem.geo.wrinkles == "around":
+        phase, radial, weights, _ = around_profile(coords, disp)
+        return float(circumferential_wavenumber(phase, radial, weights))
+    t, un, length = along_profile(coords, disp)
+    return wrinkle_count(t, un, length)

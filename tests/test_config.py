@@ -11,9 +11,11 @@ from app import cli, config
 
 
 def test_defaults_are_the_documented_paper_case():
-    cfg = config.defaults()
-    assert cfg["geometry"] == {"kind": "bilayer", "length": 2.0, "substrate_thickness": 0.5,
-                               "film_thickness": 0.01}
+    cfg = config.resolve({})
+    geo = {k: v for k, v in cfg["geometry"].items() if v is not None}
+    assert geo == {"kind": "bilayer", "length": 2.0, "substrate_thickness": 0.5, "film_thickness": 0.01}
+    tube = config.resolve({"geometry": {"kind": "tube"}})["geometry"]
+    assert (tube["outer_radius"], tube["substrate_thickness"], tube["film_thickness"]) == (1.0, 0.2, 0.02)
     assert cfg["material"]["film"]["modulus_ratio"] == 8.0
     film = config.film_overrides(config.resolve({}))
     assert film["shear_modulus"] == pytest.approx(0.8)
@@ -49,6 +51,16 @@ BAD = [
     ("[material.film]\nmodulus_ratio = 2.0\nshear_modulus = 0.2\n", "material.film.shear_modulus", "not both"),
     ("[geometry]\nlength = 0.005\n", "mesh.element_size", "<= geometry.length/2"),
     ("geometry = 3\n", "geometry", "table"),
+    ("[geometry]\nkind = \"tube\"\nlength = 2.0\n", "geometry.length", "not used by geometry.kind = 'tube'"),
+    ("[geometry]\nkind = \"tube\"\nsubstrate_thickness = 0.99\n", "geometry.substrate_thickness",
+     "allowed: < 0.98"),
+    ("[geometry]\nkind = \"elliptic-tube\"\naspect_ratio = 0.5\n", "geometry.aspect_ratio", "in [1, 10]"),
+    ("[geometry]\nkind = \"tube\"\n[loading]\nkind = \"compression\"\n", "loading.kind", "'swelling'"),
+    ("[geometry]\nkind = \"msh\"\n", "geometry.file", "must name a .msh file"),
+    ("[geometry]\nkind = \"msh\"\nfile = \"a.msh\"\nlayers = { film = \"glass\" }\n",
+     "geometry.layers.film", "allowed: film, substrate"),
+    ("[geometry]\nkind = \"msh\"\nfile = \"a.msh\"\nlayers = { film = \"film\" }\n"
+     "boundaries = { top = \"open\" }\n", "geometry.boundaries.top", "allowed: permeable"),
 ]
 
 
