@@ -102,6 +102,14 @@ def vertex_to_geometry(domain) -> np.ndarray:
     return out
 
 
+def cell_geometry_nodes(domain) -> np.ndarray:
+    """Geometry node indices per cell (owned + ghost), shape (num_cells, nodes_per_cell)."""
+    dm = domain.geometry.dofmap
+    n = domain.topology.index_map(domain.topology.dim).size_local + \
+        domain.topology.index_map(domain.topology.dim).num_ghosts
+    return np.asarray(dm.array, dtype=np.int64).reshape(n, -1)
+
+
 def exterior_facets(domain) -> np.ndarray:
     fdim = domain.topology.dim - 1
     domain.topology.create_connectivity(fdim, fdim + 1)

@@ -10,6 +10,7 @@ Boundary roles (mechanics + chemistry):
 
 Growth: ``mean_normal`` is the mean displacement of the permeable surface along the body's outward
 normal there (bilayer: mean u_y of the top; tube: mean inward radial displacement of the passage);
+``mean_radial`` (tubes) is the mean inward radial displacement of the passage's nodes;
 ``vertex`` is the inward displacement of one surface point (the elliptic passage's minor-axis vertex,
 the paper's g_c,x). Wrinkles are counted ``along`` an open surface (half-waves) or ``around`` a
 closed one (integer wavenumber).
@@ -61,7 +62,7 @@ def build(cfg: dict, comm) -> GeometrySetup:
         except tube.GeometryError as err:
             raise config.ConfigError(err.key, str(err)) from None
         setup = GeometrySetup(tm, {"film": "film", "substrate": "substrate"}, {"inner": "permeable", "outer": "fixed"},
-                              wrinkles="around")
+                              growth="mean_radial", wrinkles="around")
         if kind == "elliptic-tube":
             setup.growth = "vertex"
             setup.growth_point = (tm.info["semi_minor"], 0.0)

@@ -194,7 +194,14 @@ class Problem:
 
     def growth(self) -> float:
         """The paper's growth [mm]: mean displacement of the permeable surface along the body's outward
-        normal, or the inward displacement of one point (elliptic passage: minor-axis vertex)."""
+        normal; for tubes the mean inward radial displacement of the passage's nodes (arc-length
+        weighted); or the inward displacement of one point (elliptic passage: minor-axis vertex)."""
+        if self.geo.growth == "mean_radial":
+            from app.wrinkles import around_profile, boundary_displacement
+
+            coords, disp = boundary_displacement(self, self.state.x.array, self.geo.facets_with_role("permeable"))
+            _, radial, weights, _ = around_profile(coords, disp, centre=(0.0, 0.0))
+            return float(-np.sum(weights * radial) / np.sum(weights))
         if self.geo.growth == "vertex":
             local = 0.0
             if self._growth_dof is not None:
