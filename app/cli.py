@@ -35,6 +35,10 @@ def _parser() -> argparse.ArgumentParser:
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     sub.add_parser("version", help="print hydrobuckle, dolfinx, PETSc, SLEPc and gmsh versions")
+    msh = sub.add_parser("mesh", help="build a config's geometry and write it as a gmsh .msh file")
+    msh.add_argument("config")
+    msh.add_argument("-o", "--output", required=True, help="the .msh file to write")
+    msh.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     conv = sub.add_parser("converge", help="time-step and mesh refinement study of g_c (Richardson estimate)")
     conv.add_argument("config")
     conv.add_argument("-o", "--output", help="study directory (default results/<config name>-converge)")
@@ -127,6 +131,28 @@ def cmd_converge(args) -> int:
     return EXIT_OK if report["base"] else EXIT_SOLVER
 
 
+def cmd_mesh(args) -> int:
+    comm = _comm()
+    try:
+        cfg = config.load(args.config, args.set)
+        if cfg["geometry"]["kind"] == "msh":
+            raise config.ConfigError("geometry.kind", "'msh' already is a .msh file; allowed here: bilayer, tube, "
+                                     "elliptic-tube")
+        from app import geometry
+
+        out = Path(args.output)
+        if comm.rank == 0:
+            out.parent.mkdir(parents=True, exist_ok=True)
+        setup = geometry.build(cfg, comm, msh_path=str(out))
+    except config.ConfigError as err:
+        return _input_error(comm, err)
+    if comm.rank == 0:
+        tm = setup.tm
+        print(f"hydrobuckle: wrote {out}: cell groups {sorted(tm.cell_names)}, facet groups "
+              f"{sorted(tm.facet_names)}; {tm.info}")
+    return EXIT_OK
+
+
 def _setup_logging(comm, quiet: bool) -> None:
     import logging
 
@@ -135,7 +161,8 @@ def _setup_logging(comm, quiet: bool) -> None:
     logging_setup.setup(comm, logging.WARNING if quiet else logging.INFO)
 
 
-COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version, "converge": cmd_converge}
+COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version, "converge": cmd_converge,
+            "mesh": cmd_mesh}
 
 
 def main(argv: list[str] | None = None) -> int:

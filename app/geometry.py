@@ -39,7 +39,8 @@ class GeometrySetup:
         return [name for name, role in self.boundaries.items() if role in roles]
 
 
-def build(cfg: dict, comm) -> GeometrySetup:
+def build(cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+    """The geometry of ``cfg``; with ``msh_path`` the built-in builders also write their gmsh mesh."""
     geo, mesh = cfg["geometry"], cfg["mesh"]
     kind = geo["kind"]
     if kind == "bilayer":
@@ -47,7 +48,7 @@ def build(cfg: dict, comm) -> GeometrySetup:
 
         tm = bilayer.build(comm, geo["length"], geo["substrate_thickness"], geo["film_thickness"],
                            mesh["element_size"], mesh["film_layers"], mesh["substrate_grading"],
-                           film_grading=mesh["film_grading"])
+                           film_grading=mesh["film_grading"], msh_path=msh_path)
         return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},
                              {"left": "roller_x", "right": "roller_x", "bottom": "roller_y", "top": "permeable"},
                              wrinkles="along", plot_band=6 * geo["film_thickness"])
@@ -58,7 +59,7 @@ def build(cfg: dict, comm) -> GeometrySetup:
         try:
             tm = tube.build(comm, geo["outer_radius"], geo["substrate_thickness"], geo["film_thickness"],
                             mesh["element_size"], mesh["film_layers"], mesh["substrate_grading"], aspect_ratio=ar,
-                            film_grading=mesh["film_grading"])
+                            film_grading=mesh["film_grading"], msh_path=msh_path)
         except tube.GeometryError as err:
             raise config.ConfigError(err.key, str(err)) from None
         setup = GeometrySetup(tm, {"film": "film", "substrate": "substrate"}, {"inner": "permeable", "outer": "fixed"},
