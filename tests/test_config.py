@@ -105,3 +105,17 @@ def test_console_entry_point_exit_code(tmp_path):
     ver = subprocess.run([sys.executable, "-m", "app", "version"], capture_output=True, text=True)
     assert ver.returncode == 0 and "dolfinx 0.5" in ver.stdout
     assert Path(cfg).exists()
+
+
+def test_msh_layers_and_boundaries_from_file_and_set():
+    user = {"geometry": {"kind": "msh", "file": "x.msh", "layers": {"f": "film", "s": "substrate", "c": "coating"},
+                         "boundaries": {"top": "impermeable"}},
+            "material": {"layers": {"coating": {"modulus_ratio": 3.0, "mobility": 2e-4}}}}
+    cfg = config.resolve(user, ["geometry.boundaries.top=permeable", "geometry.boundaries.base=fixed"])
+    assert cfg["geometry"]["boundaries"] == {"top": "permeable", "base": "fixed"}
+    coating = config.layer_parameters(cfg, "coating")
+    assert coating["shear_modulus"] == pytest.approx(0.3) and coating["mobility"] == 2e-4
+    assert config.layer_parameters(cfg, "substrate")["mobility"] == 1e-4
+    with pytest.raises(config.ConfigError, match="material.layers.coating.stiffness"):
+        config.resolve({**user, "material": {"layers": {"coating": {"stiffness": 1.0}}}},
+                       ["geometry.boundaries.top=permeable"])
