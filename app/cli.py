@@ -39,6 +39,15 @@ def _parser() -> argparse.ArgumentParser:
     msh.add_argument("config")
     msh.add_argument("-o", "--output", required=True, help="the .msh file to write")
     msh.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    st = sub.add_parser("study", help="run one of the paper's parameter studies (--list shows them)")
+    st.add_argument("name", nargs="?", help="study name")
+    st.add_argument("--list", action="store_true", help="list the studies and exit")
+    _study_options(st)
+    sw = sub.add_parser("sweep", help="sweep one config key over values")
+    sw.add_argument("config")
+    sw.add_argument("--param", required=True, help="dotted config key, e.g. material.film.modulus_ratio")
+    sw.add_argument("--values", required=True, help="comma-separated values")
+    _study_options(sw)
     conv = sub.add_parser("converge", help="time-step and mesh refinement study of g_c (Richardson estimate)")
     conv.add_argument("config")
     conv.add_argument("-o", "--output", help="study directory (default results/<config name>-converge)")
@@ -131,6 +140,97 @@ def cmd_converge(args) -> int:
     return EXIT_OK if report["base"] else EXIT_SOLVER
 
 
+def _study_options(p) -> None:
+    p.add_argument("-o", "--output", help="study directory (default results/<study name>)")
+    if p.prog.endswith("study"):
+        p.add_argument("--values", help="comma-separated values replacing the study's defaults")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key in every case")
+    p.add_argument("--ranks-per-case", type=int, default=1, help="MPI ranks per case (cases run side by side)")
+    p.add_argument("--force", action="store_true", help="rerun cases that are already complete")
+    p.add_argument("--error-estimate", action="store_true",
+                   help="estimate each case's discretization error (two coarsened companion runs per case)")
+    p.add_argument("--isomodes", action=argparse.BooleanOptionalAction, default=None,
+                   help="continue past the onset and record later crossings (isomode curves)")
+    p.add_argument("-q", "--quiet", action="store_true")
+
+
+def _parse_values(text: str) -> list:
+    out = []
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        _, v = config.parse_override(f"v={item}")
+        out.append(v)
+    if not out:
+        raise config.ConfigError("--values", "needs at least one value, e.g. --values 0.01,0.02")
+    return out
+
+
+def cmd_study(args) -> int:
+    from app import studies
+
+    if args.list or not args.name:
+        for name, spec in studies.STUDIES.items():
+            values = ", ".join(f"{v:g}" for v in spec.values)
+            print(f"{name:26s} {spec.description}\n{'':26s} {spec.param} = {values}")
+        return EXIT_OK if args.list else _input_error(None, config.ConfigError(
+            "study", "needs a name; allowed: " + ", ".join(studies.STUDIES)))
+    comm = _comm()
+    if args.name not in studies.STUDIES:
+        return _input_error(comm, config.ConfigError("study", f"{args.name!r} is unknown; allowed: "
+                                                     + ", ".join(studies.STUDIES)))
+    outdir = Path(args.output) if args.output else Path("results") / args.name
+    try:
+        values = _parse_values(args.values) if args.values else None
+        spec, cases = studies.study_cases(args.name, outdir, values, args.set, args.error_estimate, args.isomodes)
+        _check_ranks(args, comm)
+    except config.ConfigError as err:
+        return _input_error(comm, err)
+    _setup_logging(comm, args.quiet)
+    rows = studies.run_study(cases, outdir, comm, spec.description, spec.param, args.ranks_per_case, args.force)
+    return _study_exit(rows, outdir, comm)
+
+
+def cmd_sweep(args) -> int:
+    from app import studies
+
+    comm = _comm()
+    outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-sweep")
+    try:
+        values = _parse_values(args.values)
+        if not Path(args.config).is_file():
+            raise config.ConfigError("", f"config file '{args.config}' does not exist")
+        import tomllib
+
+        user = tomllib.loads(Path(args.config).read_text())
+        config.set_dotted(config.defaults(), args.param, values[0])  # the key must exist
+        cases = studies.build_cases(user, args.param, values, outdir, args.set, isomodes=bool(args.isomodes),
+                                    error_estimate=args.error_estimate)
+        _check_ranks(args, comm)
+    except config.ConfigError as err:
+        return _input_error(comm, err)
+    except ValueError as err:
+        return _input_error(comm, config.ConfigError("", f"config file '{args.config}': {err}"))
+    _setup_logging(comm, args.quiet)
+    title = f"{Path(args.config).stem}: sweep of {args.param}"
+    rows = studies.run_study(cases, outdir, comm, title, args.param, args.ranks_per_case, args.force)
+    return _study_exit(rows, outdir, comm)
+
+
+def _check_ranks(args, comm) -> None:
+    if not 1 <= args.ranks_per_case <= comm.size:
+        raise config.ConfigError("--ranks-per-case", f"= {args.ranks_per_case} is out of range; allowed: 1..{comm.size} "
+                                 "(the number of MPI ranks)")
+
+
+def _study_exit(rows, outdir, comm) -> int:
+    if comm.rank == 0:
+        done = sum(r["status"] in ("buckled", "stable") for r in rows)
+        print(f"hydrobuckle: study {outdir}: {done}/{len(rows)} cases complete; study.csv, study.png, modes.png")
+    return EXIT_OK if all(r["status"] in ("buckled", "stable") for r in rows) else EXIT_SOLVER
+
+
 def cmd_mesh(args) -> int:
     comm = _comm()
     try:
@@ -162,7 +262,7 @@ def _setup_logging(comm, quiet: bool) -> None:
 
 
 COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version, "converge": cmd_converge,
-            "mesh": cmd_mesh}
+            "mesh": cmd_mesh, "study": cmd_study, "sweep": cmd_sweep}
 
 
 def main(argv: list[str] | None = None) -> int:

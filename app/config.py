@@ -335,6 +335,14 @@ def validate(cfg: dict) -> None:
         if mesh["element_size"] > (R - H - w) / 2:
             raise ConfigError("mesh.element_size", f"= {mesh['element_size']:g} is too coarse; allowed: "
                               f"<= passage radius/2 = {(R - H - w) / 2:g}")
+    if kind in ("tube", "elliptic-tube"):
+        from meshes.tube import GeometryError, check_geometry
+
+        try:
+            check_geometry(geo["outer_radius"], geo["substrate_thickness"], geo["film_thickness"],
+                           geo.get("aspect_ratio") or 1.0)
+        except GeometryError as err:
+            raise ConfigError(err.key, str(err)) from None
     if kind == "tube" and geo.get("aspect_ratio") not in (None, 1.0):
         raise ConfigError("geometry.aspect_ratio", "is for geometry.kind = 'elliptic-tube'")
     if kind == "msh":

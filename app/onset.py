@@ -35,6 +35,9 @@ class Crossing:
     bisection_solves: int = 0
     mode: np.ndarray | None = None  # mixed-space array of the buckling mode (local)
     state: np.ndarray | None = None  # mixed-space array of the state at the unstable end
+    lo: object = None  # stepper snapshots at the bracket ends (for further crossings)
+    hi: object = None
+    hi_count: int = 0  # negative eigenvalues at the unstable end
 
     def as_dict(self) -> dict:
         return {"time": self.time, "growth_mm": self.growth_mm, "growth_um": 1e3 * self.growth_mm,
@@ -73,6 +76,7 @@ def locate_crossing(stepper, analyzer, snap_stable, snap_unstable, base_count: i
 
     g_lo, pairs_lo = end_data(lo, base_count + 1)
     g_hi, pairs_hi = end_data(hi, max(n_modes, base_count + BAND_MODES))
+    hi_count = analyzer.inertia()[0]
     lam_lo = pairs_lo[base_count].value if len(pairs_lo) > base_count else float("nan")
     lam_hi = pairs_hi[base_count].value if len(pairs_hi) > base_count else float("nan")
     if np.isfinite(lam_lo) and np.isfinite(lam_hi) and lam_lo > 0 > lam_hi:
@@ -92,5 +96,6 @@ def locate_crossing(stepper, analyzer, snap_stable, snap_unstable, base_count: i
         wrinkle_count=vertex if vertex is not None else first, first_mode_wrinkle_count=first,
         lambda_min_before=lam_lo,
         lambda_min_after=lam_hi, bracket=(lo.t, hi.t), negative_eigenvalues=base_count + 1, modes=modes,
-        bisection_solves=solves, mode=mode_pair.vector, state=p.state.x.array.copy())
+        bisection_solves=solves, mode=mode_pair.vector, state=p.state.x.array.copy(), lo=lo, hi=hi,
+        hi_count=hi_count)
     return crossing

@@ -20,7 +20,7 @@ from app import compat, config
 from app.material import chemical_potential
 
 RESULT_FILES = ("summary.json", "history.csv", "config.toml", "fields.xdmf", "fields.h5", "history.png",
-                "mode.xdmf", "mode.h5", "mode.png")
+                "mode.xdmf", "mode.h5", "mode.png", "mode_surface.csv")
 
 
 def versions() -> dict:
@@ -152,7 +152,12 @@ class ResultWriter:
         polys = _gather_cells(problem, base.x.array, mode.x.array)
         from app.wrinkles import along_profile, around_profile, boundary_displacement
 
-        coords, disp = boundary_displacement(problem, crossing.mode, problem.geo.facets_with_role("permeable"))
+        groups = problem.geo.facets_with_role("permeable")
+        coords, disp = boundary_displacement(problem, crossing.mode, groups)
+        _, state_disp = boundary_displacement(problem, crossing.state, groups)
+        if self.rank0:  # the surface data the study galleries draw from
+            np.savetxt(self.outdir / "mode_surface.csv", np.column_stack([coords, disp, state_disp]), delimiter=",",
+                       header="x,y,mode_ux,mode_uy,state_ux,state_uy", comments="")
         if problem.geo.wrinkles == "around":
             _, radial, _, theta = around_profile(coords, disp)
             profile = (np.degrees(theta), radial / (np.abs(radial).max() or 1.0), "angle around the passage [deg]",

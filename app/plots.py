@@ -116,3 +116,118 @@ def envelope(angle_deg, values):
     even = np.interp(grid, a, v, period=360.0)
     env = np.abs(hilbert(even - even.mean()))
     return np.interp(angle_deg, grid, env, period=360.0)
+
+
+def _series(rows):
+    out = {}
+    for r in rows:
+        out.setdefault(r["series"], []).append(r)
+    return out
+
+
+def study_plot(rows: list[dict], title: str, param: str, path) -> None:
+    """g_c and N_c against the swept parameter (two panels, one line per series), like the paper's
+    study figures; error bars where a discretization error was estimated."""
+    import numpy as np
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    for i, (label, rs) in enumerate(_series(rows).items()):
+        ok = [r for r in rs if r["g_c_um"] is not None]
+        if not ok:
+            continue
+        x = np.array([float(r["value"]) for r in ok])
+        g = np.array([r["g_c_um"] for r in ok])
+        err = np.array([r["g_c_error_um"] or 0.0 for r in ok])
+        ax1.errorbar(x, g, yerr=err if err.any() else None, fmt="o-", color=f"C{i}", label=label or None,
+                     capsize=3, ms=4)
+        ax2.plot(x, [r["N_c"] for r in ok], "s-", color=f"C{i}", label=label or None, ms=4)
+        stable = [float(r["value"]) for r in rs if r["status"] == "stable"]
+        if stable:
+            ax1.plot(stable, [g.min()] * len(stable), "x", color=f"C{i}", label="no onset (stable)")
+    for ax, ylabel in ((ax1, "critical growth g_c [um]"), (ax2, "wrinkle count N_c")):
+        ax.set_xlabel(param.split(".")[-1].replace("_", " "))
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def modes_gallery(rows: list[dict], outdir, title: str, path) -> None:
+    """The critical mode of every case: the normal mode displacement along an open surface, or the
+    deformed passage outline of a tube."""
+    import numpy as np
+
+    from app.wrinkles import along_profile, around_profile
+
+    cases = [r for r in rows if (outdir / r["directory"] / "mode_surface.csv").is_file()]
+    if not cases:
+        return
+    ncol = min(4, len(cases))
+    nrow = -(-len(cases) // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.2 * ncol, 2.6 * nrow), squeeze=False)
+    for ax in axes.flat:
+        ax.set_axis_off()
+    for ax, r in zip(axes.flat, cases):
+        ax.set_axis_on()
+        data = np.loadtxt(outdir / r["directory"] / "mode_surface.csv", delimiter=",", skiprows=1, ndmin=2)
+        xy, mode, state = data[:, :2], data[:, 2:4], data[:, 4:6]
+        closed = np.allclose(xy.mean(axis=0), 0.0, atol=0.05 * np.ptp(xy))
+        if closed:
+            _, _, _, theta = around_profile(xy, mode)
+            order = np.argsort(np.arctan2(xy[:, 1], xy[:, 0]))
+            pts = xy[order] + state[order]
+            m = mode[order] / (np.abs(mode).max() or 1.0)
+            shape = pts + 0.04 * np.ptp(xy[:, 0]) * m
+            shape = np.vstack([shape, shape[:1]])
+            ax.plot(shape[:, 0], shape[:, 1], "-", color="#c44e52", lw=0.8)
+            ax.set_aspect("equal")
+            ax.set_xticks([])
+            ax.set_yticks([])
+        else:
+            t, un, _ = along_profile(xy, mode)
+            ax.plot(t - t.min(), un / (np.abs(un).max() or 1.0), "-", color="C0", lw=0.7)
+            ax.set_yticks([])
+        ax.set_title(f"{r['value']:g}: g_c={r['g_c_um']:.3g} um, N={r['N_c']:g}", fontsize=8)
+    fig.suptitle(f"critical modes: {title}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def isomode_plot(rows: list[dict], title: str, param: str, path) -> None:
+    """Isomodes: for each wrinkle count N, the growth at the first crossing with that count across the
+    sweep; their lower envelope is g_c (the paper's Fig. "bi_film")."""
+    import numpy as np
+
+    curves: dict[float, list] = {}
+    envelope = []
+    for r in rows:
+        if not r["crossings"]:
+            continue
+        seen = set()
+        pairs = [c.split("@") for c in r["crossings"].split(";")]
+        for n, g in pairs:
+            n, g = float(n), float(g)
+            if n not in seen:
+                curves.setdefault(n, []).append((float(r["value"]), g))
+                seen.add(n)
+        envelope.append((float(r["value"]), r["g_c_um"]))
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    for n in sorted(curves):
+        pts = np.array(sorted(curves[n]))
+        if len(pts) >= 2:
+            ax.plot(pts[:, 0], pts[:, 1], "-", lw=1, label=f"N = {n:g}")
+    env = np.array(sorted(envelope))
+    ax.plot(env[:, 0], env[:, 1], "k.-", lw=2, label="g_c (first crossing)")
+    ax.set_xlabel(param.split(".")[-1].replace("_", " "))
+    ax.set_ylabel("growth at crossing [um]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    ax.set_title(f"isomodes: {title}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

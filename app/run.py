@@ -27,7 +27,7 @@ def row_of(rec: StepRecord) -> dict:
     return d
 
 
-def simulate(cfg: dict, outdir, comm, problem: Problem | None = None) -> dict:
+def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: bool = True) -> dict:
     """Run the transient problem of ``cfg``; write results to ``outdir``; return the summary."""
     log = logging_setup.get()
     wall0 = time.perf_counter()
@@ -69,22 +69,30 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None) -> dict:
                     lam = analyzer.lambda_min(nneg)
                 rec.extra.update({"negative_eigenvalues": nneg, "lambda_min": lam})
             writer.history_row(row_of(rec))
-            log.info(f"step {rec.step:5d}  t = {rec.time:10.5f} s  dt = {rec.dt:9.3e} s  "
+            (log.info if progress else log.debug)(f"step {rec.step:5d}  t = {rec.time:10.5f} s  dt = {rec.dt:9.3e} s  "
                      f"newton {rec.newton_its:2d}  growth = {1e3 * rec.growth_mm:9.4f} um  "
                      f"mu_bar = {rec.mu_bar:9.3f} MPa" + (f"  neg.eig. {nneg}" if nneg is not None else ""))
             if nneg is not None and nneg > count:
                 snap_unstable = stepper.snapshot()
-                log.info(f"  K lost positive definiteness between t = {snap_prev.t:.6f} and {rec.time:.6f} s")
-                crossing = locate_crossing(stepper, analyzer, snap_prev, snap_unstable, count, scfg["tolerance"],
-                                           scfg["modes"], log=log.info)
-                crossings.append(crossing)
-                log.info(f"  onset #{len(crossings)}: t_c = {crossing.time:.6f} s, "
-                         f"growth g_c = {1e3 * crossing.growth_mm:.4f} um, N_c = {crossing.wrinkle_count:g}")
-                if len(crossings) == 1:
-                    writer.write_mode(problem, crossing)
-                count = nneg
+                log.info(f"  K lost positive definiteness between t = {snap_prev.t:.6f} and {rec.time:.6f} s "
+                         f"({nneg - count} new negative eigenvalue(s))")
+                lo, stop = snap_prev, False
+                while count < nneg:  # one bisection per new negative eigenvalue
+                    crossing = locate_crossing(stepper, analyzer, lo, snap_unstable, count, scfg["tolerance"],
+                                               scfg["modes"], log=log.info if progress else log.debug)
+                    crossings.append(crossing)
+                    log.info(f"  crossing #{len(crossings)}: t = {crossing.time:.6f} s, "
+                             f"growth = {1e3 * crossing.growth_mm:.4f} um, N = {crossing.wrinkle_count:g}")
+                    if len(crossings) == 1:
+                        writer.write_mode(problem, crossing)
+                    count += 1
+                    lo = crossing.hi if crossing.hi_count == count else crossing.lo
+                    stop = scfg["stop_at_onset"] or len(crossings) >= scfg["max_crossings"]
+                    if stop:
+                        break
+                count = max(count, nneg)
                 stepper.restore(snap_unstable)
-                if scfg["stop_at_onset"] or len(crossings) >= scfg["max_crossings"]:
+                if stop:
                     break
             snap_prev = stepper.snapshot()
     except StepFailure as err:

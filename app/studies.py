@@ -1,0 +1,255 @@
+"""Parameter studies: the paper's studies by name (``hydrobuckle study``) and any sweep
+(``hydrobuckle sweep``), resumable and spread over groups of MPI ranks.
+
+Each case runs in its own subdirectory with the normal run outputs. A case whose directory holds a
+summary with status buckled/stable and the same resolved config is complete and is skipped on a
+rerun (unless ``force``). Cases are distributed round-robin over groups of ``ranks_per_case`` ranks
+(MPI sub-communicators); every case runs exactly as it would alone on that many ranks, so results do
+not depend on how the study was launched. Rank 0 of the world then writes study.csv, study.png and
+modes.png (and isomodes.png for studies that track later crossings).
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from app import config, logging_setup
+
+COMPLETE = ("buckled", "stable")
+ISOMODE_CROSSINGS = 6  # later crossings tracked per case for isomode curves
+
+
+@dataclass
+class StudySpec:
+    """A named study: a base config (dotted keys), the swept key, its default values, and series."""
+
+    name: str
+    description: str
+    base: dict
+    param: str
+    values: list
+    series: dict = field(default_factory=dict)  # label -> extra dotted overrides (e.g. chi values)
+    scale_mesh_with_film: bool = True
+    isomodes: bool = False
+    paper_trend: str = ""
+
+
+def _bilayer(**kw):
+    return {"geometry.kind": "bilayer", "material.preswelling": 1.01, "material.interaction": 0.1,
+            "time.end": 10.0, "time.dt_max": 0.05, **kw}
+
+
+def _tube(**kw):
+    return {"geometry.kind": "tube", "material.preswelling": 1.01, "material.interaction": 0.1,
+            "geometry.outer_radius": 1.0, "time.end": 10.0, "time.dt_max": 0.05, **kw}
+
+
+STUDIES = {s.name: s for s in [
+    StudySpec("bilayer-film-thickness", "bilayer, gamma_f/gamma_s = 8: g_c and N_c against the film thickness w",
+              _bilayer(**{"material.film.modulus_ratio": 8.0}), "geometry.film_thickness",
+              [0.005, 0.0075, 0.01, 0.015, 0.02, 0.03, 0.05, 0.1], isomodes=True,
+              paper_trend="g_c rises and N_c falls with w; g_c is the envelope of isomodes"),
+    StudySpec("bilayer-modulus-ratio", "bilayer, w = 0.01 mm: against gamma_f/gamma_s",
+              _bilayer(**{"geometry.film_thickness": 0.01}), "material.film.modulus_ratio",
+              [1.0, 2.0, 4.0, 6.0, 8.0, 10.0, 15.0, 20.0, 30.0, 50.0],
+              paper_trend="g_c falls, steeply below about 10; N_c first rises, then falls"),
+    StudySpec("bilayer-preswelling", "bilayer, w = 0.01 mm, gamma_f/gamma_s = 20: against J0, for chi = 0.1 and 0.8",
+              _bilayer(**{"geometry.film_thickness": 0.01, "material.film.modulus_ratio": 20.0}),
+              "material.preswelling", [1.01, 1.1, 1.2, 1.3, 1.4, 1.5],
+              series={"chi=0.1": {"material.interaction": 0.1}, "chi=0.8": {"material.interaction": 0.8}},
+              paper_trend="g_c and N_c nearly independent of J0 and chi (g_c within 1 um)"),
+    StudySpec("tube-film-thickness", "tube, H = 0.2 mm, gamma_f/gamma_s = 10: against w",
+              _tube(**{"geometry.substrate_thickness": 0.2, "material.film.modulus_ratio": 10.0}),
+              "geometry.film_thickness", [0.01, 0.02, 0.03, 0.04, 0.05],
+              paper_trend="g_c rises and N_c falls with w"),
+    StudySpec("tube-substrate-thickness", "tube, w = 0.02 mm, gamma_f/gamma_s = 10: against H",
+              _tube(**{"geometry.film_thickness": 0.02, "material.film.modulus_ratio": 10.0}),
+              "geometry.substrate_thickness", [0.1, 0.15, 0.2, 0.3, 0.4],
+              paper_trend="g_c and N_c fall as H grows"),
+    StudySpec("tube-modulus-ratio", "tube, w = 0.02 mm, H = 0.2 mm: against gamma_f/gamma_s",
+              _tube(**{"geometry.film_thickness": 0.02, "geometry.substrate_thickness": 0.2}),
+              "material.film.modulus_ratio", [1.0, 2.0, 5.0, 10.0, 20.0, 30.0, 50.0],
+              paper_trend="g_c falls, steeply below about 20; N_c first rises, then falls"),
+    StudySpec("tube-aspect-ratio", "elliptic tube, w = 0.02 mm, gamma_f/gamma_s = 10, passage area of r = 0.78 mm: "
+              "g_c,x against a/b", {**_tube(**{"geometry.film_thickness": 0.02, "geometry.substrate_thickness": 0.2,
+                                                "material.film.modulus_ratio": 10.0}),
+                                     "geometry.kind": "elliptic-tube"},
+              "geometry.aspect_ratio", [1.0, 1.1, 1.2, 1.3, 1.4, 1.5],
+              paper_trend="g_c,x rises slightly with a/b; wrinkles fade where the substrate is thinner"),
+]}
+
+
+@dataclass
+class Case:
+    label: str
+    series: str
+    value: object
+    cfg: dict
+    outdir: Path
+
+
+def _format_value(v) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def build_cases(base_cfg_user: dict, param: str, values: list, outdir: Path, overrides: list[str],
+                series: dict | None = None, scale_mesh_with_film: bool = False, isomodes: bool = False,
+                dotted_base: dict | None = None, error_estimate: bool = False) -> list[Case]:
+    """Resolve one config per (series, value); bad values fail here, before anything runs."""
+    cases = []
+    for s_label, s_over in (series or {"": {}}).items():
+        for v in values:
+            dotted = {**(dotted_base or {}), **s_over, param: v}
+            items = [f"{k}={_toml(val)}" for k, val in dotted.items()] + list(overrides)
+            try:
+                cfg = config.resolve(copy.deepcopy(base_cfg_user), items)
+            except config.ConfigError as err:
+                raise config.ConfigError("", f"{err} (case {param} = {_format_value(v)})") from None
+            if scale_mesh_with_film and param == "geometry.film_thickness":
+                # keep film elements' shape: element length along the film <= 0.4 w (bilayer), 0.5 w (tube)
+                f = 0.4 if cfg["geometry"]["kind"] == "bilayer" else 0.5
+                cfg["mesh"]["element_size"] = min(cfg["mesh"]["element_size"], f * v)
+            cfg["output"]["fields"] = False
+            cfg["stability"]["error_estimate"] = error_estimate
+            if isomodes:
+                cfg["stability"]["stop_at_onset"] = False
+                cfg["stability"]["max_crossings"] = min(cfg["stability"]["max_crossings"], ISOMODE_CROSSINGS)
+            config.validate(cfg)
+            label = (f"{s_label}_" if s_label else "") + f"{param.split('.')[-1]}={_format_value(v)}"
+            cases.append(Case(label, s_label, v, cfg, outdir / label))
+    return cases
+
+
+def _toml(v) -> str:
+    if isinstance(v, str):
+        return '"' + v + '"'
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return repr(v)
+
+
+def is_complete(case: Case) -> bool:
+    summary, cfg_file = case.outdir / "summary.json", case.outdir / "config.toml"
+    if not summary.is_file() or not cfg_file.is_file():
+        return False
+    try:
+        s = json.loads(summary.read_text())
+        return s.get("status") in COMPLETE and config.load(cfg_file) == case.cfg
+    except (ValueError, config.ConfigError):
+        return False
+
+
+def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = False) -> None:
+    """Run every case (skipping complete ones) on groups of ``ranks_per_case`` ranks."""
+    from app.run import simulate
+
+    log = logging_setup.get()
+    k = max(1, min(ranks_per_case, comm.size))
+    n_groups = comm.size // k
+    color = comm.rank // k if comm.rank < n_groups * k else n_groups  # leftover ranks idle
+    sub = comm.Split(color, comm.rank)
+    try:
+        for i, case in enumerate(cases):
+            if color >= n_groups or i % n_groups != color:
+                continue
+            if not force and is_complete(case):
+                if sub.rank == 0:
+                    log.info(f"study: {case.label}: complete, skipped")
+                continue
+            if sub.rank == 0:
+                log.info(f"study: {case.label}: running on {sub.size} rank(s)")
+            t0 = time.perf_counter()
+            try:
+                s = simulate(case.cfg, case.outdir, sub, progress=False)
+                if case.cfg["stability"]["error_estimate"] and s["status"] == "buckled":
+                    from app.convergence import companion_error_estimate
+                    from app.output import rewrite_summary
+
+                    s["critical"]["discretization_error"] = companion_error_estimate(
+                        case.cfg, s["critical"]["growth_um"], case.outdir, sub)
+                    rewrite_summary(case.outdir, sub, s)
+            except Exception as err:  # a failed case is reported, the others go on
+                if sub.rank == 0:
+                    log.info(f"study: {case.label}: failed: {err}")
+                    case.outdir.mkdir(parents=True, exist_ok=True)
+                    (case.outdir / "error.txt").write_text(f"{type(err).__name__}: {err}\n")
+            if sub.rank == 0:
+                log.info(f"study: {case.label}: done in {time.perf_counter() - t0:.1f} s")
+    finally:
+        comm.barrier()
+        sub.Free()
+
+
+COLUMNS = ("series", "parameter", "value", "status", "g_c_um", "g_c_error_um", "N_c", "t_c", "mu_c",
+           "crossings", "wall_time_s", "directory")
+
+
+def collect(cases: list[Case], param: str) -> list[dict]:
+    rows = []
+    for case in cases:
+        row = {"series": case.series, "parameter": param, "value": case.value, "status": "missing",
+               "g_c_um": None, "g_c_error_um": None, "N_c": None, "t_c": None, "mu_c": None, "crossings": "",
+               "wall_time_s": None, "directory": case.outdir.name}
+        f = case.outdir / "summary.json"
+        if f.is_file():
+            s = json.loads(f.read_text())
+            crit = s.get("critical") or {}
+            est = crit.get("discretization_error") or {}
+            crossings = s.get("crossings") or ([crit] if crit else [])
+            row.update(status=s["status"], g_c_um=crit.get("growth_um"), g_c_error_um=est.get("total_um"),
+                       N_c=crit.get("wrinkle_count"), t_c=crit.get("time"), mu_c=crit.get("mu_bar"),
+                       crossings=";".join(f"{c['first_mode_wrinkle_count']:g}@{c['growth_um']:.5g}"
+                                          for c in crossings),
+                       wall_time_s=s.get("wall_time_s"))
+        elif (case.outdir / "error.txt").is_file():
+            row["status"] = "failed"
+        rows.append(row)
+    return rows
+
+
+def write_tables(rows: list[dict], outdir: Path, title: str, param: str) -> None:
+    outdir.mkdir(parents=True, exist_ok=True)
+    with open(outdir / "study.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: ("" if r[k] is None else r[k]) for k in COLUMNS})
+    from app.plots import isomode_plot, modes_gallery, study_plot
+
+    study_plot(rows, title, param, outdir / "study.png")
+    modes_gallery(rows, outdir, title, outdir / "modes.png")
+    if any(r["crossings"] and ";" in r["crossings"] for r in rows):
+        isomode_plot(rows, title, param, outdir / "isomodes.png")
+
+
+def run_study(cases: list[Case], outdir: Path, comm, title: str, param: str, ranks_per_case: int = 1,
+              force: bool = False) -> list[dict]:
+    run_cases(cases, comm, ranks_per_case, force)
+    rows = collect(cases, param) if comm.rank == 0 else None
+    if comm.rank == 0:
+        write_tables(rows, outdir, title, param)
+        (outdir / "study.json").write_text(json.dumps({"title": title, "parameter": param, "rows": rows},
+                                                      indent=2, default=_json_default) + "\n")
+    return comm.bcast(rows, root=0)
+
+
+def _json_default(o):
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    return str(o)
+
+
+def study_cases(name: str, outdir: Path, values: list | None, overrides: list[str],
+                error_estimate: bool = False, isomodes: bool | None = None) -> tuple[StudySpec, list[Case]]:
+    spec = STUDIES[name]
+    cases = build_cases({}, spec.param, values or spec.values, outdir, overrides, series=spec.series,
+                        scale_mesh_with_film=spec.scale_mesh_with_film,
+                        isomodes=spec.isomodes if isomodes is None else isomodes,
+                        dotted_base=spec.base, error_estimate=error_estimate)
+    return spec, cases
