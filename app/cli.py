@@ -7,6 +7,7 @@ Exit codes: 0 success, 1 solver failure (summary.json says "failed", history kep
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -48,6 +49,13 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("--param", required=True, help="dotted config key, e.g. material.film.modulus_ratio")
     sw.add_argument("--values", required=True, help="comma-separated values")
     _study_options(sw)
+    be = sub.add_parser("bench", help="time the default bilayer to onset at three mesh sizes")
+    be.add_argument("--sizes", default="coarse,default,fine", help="comma-separated: coarse, default, fine")
+    be.add_argument("--ranks", help="comma-separated rank counts to launch under mpirun, e.g. 1,2")
+    be.add_argument("-o", "--output", default="results/bench", help="directory for bench.json and the runs")
+    be.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    be.add_argument("--json-only", help=argparse.SUPPRESS)
+    be.add_argument("-q", "--quiet", action="store_true")
     conv = sub.add_parser("converge", help="time-step and mesh refinement study of g_c (Richardson estimate)")
     conv.add_argument("config")
     conv.add_argument("-o", "--output", help="study directory (default results/<config name>-converge)")
@@ -231,6 +239,50 @@ def _study_exit(rows, outdir, comm) -> int:
     return EXIT_OK if all(r["status"] in ("buckled", "stable") for r in rows) else EXIT_SOLVER
 
 
+def cmd_bench(args) -> int:
+    from app import bench
+
+    comm = _comm()
+    try:
+        sizes = [x.strip() for x in args.sizes.split(",") if x.strip()]
+        bad = [x for x in sizes if x not in bench.SIZES]
+        if bad or not sizes:
+            raise config.ConfigError("--sizes", f"{','.join(bad) or '(none)'}; allowed: " + ", ".join(bench.SIZES))
+        ranks = None
+        if args.ranks:
+            try:
+                ranks = [int(x) for x in args.ranks.split(",")]
+            except ValueError:
+                ranks = [0]
+            if any(k < 1 for k in ranks):
+                raise config.ConfigError("--ranks", f"= {args.ranks}; allowed: positive integers, e.g. 1,2")
+            if comm.size > 1:
+                raise config.ConfigError("--ranks", "launches mpirun itself: run `hydrobuckle bench --ranks ...` "
+                                         "without mpirun")
+        for name in sizes:
+            bench.size_config(name, args.set)
+    except config.ConfigError as err:
+        return _input_error(comm, err)
+    _setup_logging(comm, args.quiet)
+    outdir = Path(args.output)
+    if ranks:
+        doc = bench.report(bench.launch_ranks(ranks, sizes, args.set, outdir))
+    else:
+        result = bench.run_bench(sizes, args.set, outdir, comm)
+        if args.json_only:
+            if comm.rank == 0:
+                Path(args.json_only).write_text(json.dumps(result))
+            return EXIT_OK
+        doc = bench.report({comm.size: result})
+    if comm.rank == 0:
+        outdir.mkdir(parents=True, exist_ok=True)
+        (outdir / "bench.json").write_text(json.dumps(doc, indent=2) + "\n")
+        text = bench.table(doc)
+        (outdir / "bench.md").write_text(text + "\n")
+        print(text)
+    return EXIT_OK
+
+
 def cmd_mesh(args) -> int:
     comm = _comm()
     try:
@@ -262,7 +314,7 @@ def _setup_logging(comm, quiet: bool) -> None:
 
 
 COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version, "converge": cmd_converge,
-            "mesh": cmd_mesh, "study": cmd_study, "sweep": cmd_sweep}
+            "mesh": cmd_mesh, "study": cmd_study, "sweep": cmd_sweep, "bench": cmd_bench}
 
 
 def main(argv: list[str] | None = None) -> int:

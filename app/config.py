@@ -142,6 +142,8 @@ SCHEMA: dict[str, dict[str, Key] | dict] = {
         "rtol": _key(float, 1.0e-9, _in_open(0.0, 1.0), "Newton relative residual tolerance"),
         "atol": _key(float, 1.0e-11, _gt(0), "Newton absolute residual tolerance"),
         "max_it": _key(int, 25, _in_closed(1, 1000), "Newton iterations per step"),
+        "factorization": _key(str, "cholesky", _one_of("cholesky", "lu"),
+                              "direct solver of each Newton step (MUMPS LDL^T or LU)"),
     },
     "stability": {
         "enabled": _key(bool, True, None, "test K for positive definiteness after every step"),

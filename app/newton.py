@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from petsc4py import PETSc
 
-from app import compat
+from app import compat, timing
 
 _ids = itertools.count()
 
@@ -29,10 +29,12 @@ class NewtonResult:
 class NewtonSolver:
     """SNES (newtonls) on R(w) = 0 with Jacobian K; w is ``problem.w``."""
 
-    def __init__(self, problem, rtol: float, atol: float, max_it: int, line_search: str = "basic"):
+    def __init__(self, problem, rtol: float, atol: float, max_it: int, line_search: str = "basic",
+                 factorization: str = "cholesky"):
         self.problem = problem
         forms = problem.forms
         self.A = compat.create_matrix(forms.hessian)
+        self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         self.b = compat.create_vector(forms.residual)
         self.x = self.b.duplicate()
         self.prefix = f"hb{next(_ids)}_"
@@ -46,7 +48,8 @@ class NewtonSolver:
             "snes_max_it": max_it,
             "snes_max_funcs": 100 * max_it,
             "ksp_type": "preonly",
-            "pc_type": "lu",
+            # K is symmetric (a Hessian): MUMPS LDL^T, valid also where K is indefinite (past an onset)
+            "pc_type": factorization,
             "pc_factor_mat_solver_type": "mumps",
         }.items():
             opts[self.prefix + key] = value
@@ -65,19 +68,22 @@ class NewtonSolver:
         compat.function_vector(w).ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
     def _residual(self, snes, x, b):
-        self._sync_solution(x)
-        compat.assemble_residual_into(b, self.problem.forms.residual, self.problem.forms.hessian,
-                                      self.problem.bcs, x)
+        with timing.timed("assembly"):
+            self._sync_solution(x)
+            compat.assemble_residual_into(b, self.problem.forms.residual, self.problem.forms.hessian,
+                                          self.problem.bcs, x)
 
     def _jacobian(self, snes, x, J, P):
-        compat.assemble_matrix_into(J, self.problem.forms.hessian, self.problem.bcs)
+        with timing.timed("assembly"):
+            compat.assemble_matrix_into(J, self.problem.forms.hessian, self.problem.bcs)
 
     def solve(self) -> NewtonResult:
         """Solve from the current ``problem.w`` as initial guess; ``problem.w`` holds the result."""
         w_vec = compat.function_vector(self.problem.w)
         w_vec.copy(self.x)
         try:
-            self.snes.solve(None, self.x)
+            with timing.timed("newton"):
+                self.snes.solve(None, self.x)
             reason = self.snes.getConvergedReason()
         except PETSc.Error:
             reason = -100

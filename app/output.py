@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import ufl
 
-from app import compat, config
+from app import compat, config, timing
 from app.material import chemical_potential
 
 RESULT_FILES = ("summary.json", "history.csv", "config.toml", "fields.xdmf", "fields.h5", "history.png",
@@ -84,6 +84,10 @@ class ResultWriter:
 
     def history_row(self, row: dict) -> None:
         """Append one accepted step to history.csv (flushed immediately)."""
+        with timing.timed("output"):
+            self._history_row(row)
+
+    def _history_row(self, row: dict) -> None:
         self.rows.append(row)
         if not self.rank0:
             return
@@ -126,9 +130,10 @@ class ResultWriter:
     def write_fields(self, t: float) -> None:
         if self._xdmf is None:
             return
-        for f, expr in self._fields:
-            compat.interpolate(f, expr)
-            self._xdmf.write_function(f, t)
+        with timing.timed("output"):
+            for f, expr in self._fields:
+                compat.interpolate(f, expr)
+                self._xdmf.write_function(f, t)
 
     # --- buckling mode ---------------------------------------------------------------------
 

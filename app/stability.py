@@ -23,7 +23,7 @@ import numpy as np
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
-from app import compat
+from app import compat, timing
 
 
 @dataclass
@@ -78,6 +78,10 @@ class StabilityAnalyzer:
 
     def inertia(self) -> tuple[int, int, int]:
         """(negative, zero, positive) eigenvalue counts of K on the free dofs."""
+        with timing.timed("stability_test"):
+            return self._inertia()
+
+    def _inertia(self) -> tuple[int, int, int]:
         Kf = self.assemble()
         if self._ksp is None:
             ksp = PETSc.KSP().create(self.p.comm)
@@ -99,6 +103,10 @@ class StabilityAnalyzer:
 
     def eigenpairs(self, n: int = 1) -> list[Eigenpair]:
         """The n eigenpairs of K (free dofs) nearest zero, sorted ascending by eigenvalue."""
+        with timing.timed("eigen_solve"):
+            return self._eigenpairs(n)
+
+    def _eigenpairs(self, n: int) -> list[Eigenpair]:
         Kf = self.assemble()
         eps = SLEPc.EPS().create(self.p.comm)
         eps.setOperators(Kf)

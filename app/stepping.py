@@ -80,7 +80,8 @@ class TimeStepper:
         self.tol, self.adaptive = tcfg["tolerance"], tcfg["adaptive"]
         self.dt_fixed = tcfg["dt_initial"]
         self.max_steps = tcfg["max_steps"]
-        self.solver = NewtonSolver(problem, scfg["rtol"], scfg["atol"], scfg["max_it"])
+        self.solver = NewtonSolver(problem, scfg["rtol"], scfg["atol"], scfg["max_it"],
+                                   factorization=scfg["factorization"])
         self.log = log or (lambda msg: None)
         self.kinks = sorted(k for k in problem.loading.kinks() if 0 < k < self.end)
 

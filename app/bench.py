@@ -1,0 +1,170 @@
+"""``hydrobuckle bench``: the paper's default bilayer to onset at three mesh sizes, timed by category.
+
+Per accepted step the time splits into form assembly, factorizations and triangular solves (of the
+Newton iterations, from PETSc's event log), the stability test (K on the free dofs and its LDL^T
+inertia), eigen-solves, output and other. R = (time per step) / ((Newton iterations per step + 1)
+t_factor), with t_factor the mean time of one Newton factorization of the same K in the same run:
+R = 1 means a step costs exactly its factorizations (one per Newton iteration plus one for the
+stability test).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from app import config, logging_setup, timing
+
+SIZES = {"coarse": 2.0, "default": 1.0, "fine": 0.7}  # element size x s, film layers / s
+
+
+def size_config(name: str, overrides: list[str]) -> dict:
+    scale = SIZES[name]
+    cfg = config.resolve({}, list(overrides))
+    cfg["mesh"]["element_size"] = cfg["mesh"]["element_size"] * scale
+    cfg["mesh"]["film_layers"] = max(1, round(cfg["mesh"]["film_layers"] / scale))
+    cfg["output"]["fields"] = False
+    cfg["output"]["plot"] = False
+    cfg["stability"]["error_estimate"] = False
+    config.validate(cfg)
+    return cfg
+
+
+def bench_one(cfg: dict, comm, outdir: Path) -> dict:
+    from app.run import simulate
+
+    timing.reset()
+    t0 = time.perf_counter()
+    s = simulate(cfg, outdir, comm, progress=False)
+    wall = time.perf_counter() - t0
+    tt = timing.totals
+    fact, n_fact = timing.petsc_event_time(timing.FACTOR_EVENTS, "newton")
+    n_num = timing.petsc_event_time(("MatLUFactorNum", "MatCholFctrNum"), "newton")[1]
+    solves, _ = timing.petsc_event_time(timing.SOLVE_EVENTS, "newton")
+    newton_linear = tt["newton"] - tt["assembly"]
+    steps = max(1, s["steps"])
+    its = _newton_iterations(outdir)
+    t_factor = fact / max(1, n_num)
+    split = {
+        "assembly": tt["assembly"],
+        "factorization": fact,
+        "triangular_solves": solves,
+        "newton_other": max(0.0, newton_linear - fact - solves),
+        "stability_test": tt["stability_test"],
+        "eigen_solve": tt["eigen_solve"],
+        "output": tt["output"],
+    }
+    split["other"] = max(0.0, wall - sum(split.values()))
+    loop = wall - split["eigen_solve"]  # bisection's eigen-solves happen once per run, not per step
+    per_step = loop / steps
+    its_per_step = its / steps
+    crit = s.get("critical") or {}
+    rss = comm.gather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, root=0)
+    return {"ranks": comm.size, "dofs": s["mesh"]["dofs"], "cells": s["mesh"]["cells"], "steps": s["steps"],
+            "newton_iterations": its, "newton_per_step": its_per_step, "wall_time_s": wall,
+            "time_to_gc_s": wall, "g_c_um": crit.get("growth_um"), "N_c": crit.get("wrinkle_count"),
+            "time_per_step_s": per_step, "t_factor_s": t_factor, "factorizations": n_num,
+            "R": per_step / ((its_per_step + 1) * t_factor) if t_factor > 0 else None,
+            "per_step_split_s": {k: v / steps for k, v in split.items()},
+            "peak_rss_mb_per_rank": rss}
+
+
+def _newton_iterations(outdir: Path) -> int:
+    import csv
+
+    path = Path(outdir) / "history.csv"
+    total = 0
+    if path.is_file():
+        with open(path) as f:
+            for r in csv.DictReader(f):
+                total += int(r["newton_its"] or 0)
+    return total
+
+
+def run_bench(sizes: list[str], overrides: list[str], outdir: Path, comm) -> dict:
+    log = logging_setup.get()
+    results = {}
+    for name in sizes:
+        cfg = size_config(name, overrides)
+        log.info(f"bench: {name} mesh (element size {cfg['mesh']['element_size']:g} mm, "
+                 f"{cfg['mesh']['film_layers']} film layers) on {comm.size} rank(s)")
+        results[name] = bench_one(cfg, comm, outdir / f"run-{name}-np{comm.size}")
+    fit = _loglog_fit([(r["dofs"], r["time_per_step_s"]) for r in results.values()])
+    fit_f = _loglog_fit([(r["dofs"], r["t_factor_s"]) for r in results.values()])
+    return {"ranks": comm.size, "sizes": results, "time_per_step_vs_dofs_exponent": fit,
+            "t_factor_vs_dofs_exponent": fit_f}
+
+
+def _loglog_fit(points) -> float | None:
+    pts = [(math.log(d), math.log(t)) for d, t in points if d and t]
+    if len(pts) < 2:
+        return None
+    n = len(pts)
+    mx = sum(p[0] for p in pts) / n
+    my = sum(p[1] for p in pts) / n
+    den = sum((p[0] - mx) ** 2 for p in pts)
+    return sum((p[0] - mx) * (p[1] - my) for p in pts) / den if den else None
+
+
+def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdir: Path) -> dict:
+    """Run the benchmark under ``mpirun -n k`` for each k (a fresh launch each) and combine."""
+    out = {}
+    for k in ranks:
+        with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
+            tmp = f.name
+        cmd = ["mpirun", "-n", str(k), "--oversubscribe", sys.executable, "-m", "app", "bench", "--sizes",
+               ",".join(sizes), "-o", str(outdir), "--json-only", tmp, "-q"] + sum((["--set", o] for o in overrides), [])
+        env = dict(os.environ)
+        if os.getuid() == 0:
+            env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+        env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+        subprocess.run(cmd, check=True, env=env)
+        out[k] = json.loads(Path(tmp).read_text())
+        os.unlink(tmp)
+    return out
+
+
+def report(by_ranks: dict) -> dict:
+    """bench.json content: per rank count and size, plus 2-rank speedups."""
+    ranks = sorted(by_ranks)
+    doc = {"runs": {str(k): by_ranks[k] for k in ranks}, "speedup": {}}
+    if 1 in by_ranks:
+        for k in ranks:
+            if k == 1:
+                continue
+            doc["speedup"][str(k)] = {
+                name: by_ranks[1]["sizes"][name]["wall_time_s"] / r["wall_time_s"]
+                for name, r in by_ranks[k]["sizes"].items() if name in by_ranks[1]["sizes"]}
+    return doc
+
+
+def table(doc: dict) -> str:
+    lines = ["| ranks | size | dofs | steps | Newton it. | wall [s] | per step [s] | t_factor [s] | R | assembly | "
+             "factor | solves | stability | eigen | output | other | RSS/rank [MB] | g_c [um] |",
+             "|" + "---|" * 18]
+    for k, run in doc["runs"].items():
+        for name, r in run["sizes"].items():
+            sp = r["per_step_split_s"]
+            lines.append(
+                f"| {k} | {name} | {r['dofs']} | {r['steps']} | {r['newton_iterations']} | {r['wall_time_s']:.1f} | "
+                f"{r['time_per_step_s']:.3f} | {r['t_factor_s']:.4f} | {_f(r['R'])} | {sp['assembly']:.3f} | "
+                f"{sp['factorization']:.3f} | {sp['triangular_solves']:.3f} | {sp['stability_test']:.3f} | "
+                f"{sp['eigen_solve']:.3f} | {sp['output']:.3f} | {sp['other'] + sp['newton_other']:.3f} | "
+                f"{max(r['peak_rss_mb_per_rank']):.0f} | {_f(r['g_c_um'])} |")
+    for k, run in doc["runs"].items():
+        lines.append(f"\nranks {k}: time per step ~ dofs^{_f(run['time_per_step_vs_dofs_exponent'])}, "
+                     f"t_factor ~ dofs^{_f(run['t_factor_vs_dofs_exponent'])}")
+    for k, sp in doc["speedup"].items():
+        lines.append(f"speedup 1 -> {k} ranks: " + ", ".join(f"{n} {v:.2f}" for n, v in sp.items()))
+    return "\n".join(lines)
+
+
+def _f(v):
+    return "-" if v is None else f"{v:.3g}"

@@ -1,0 +1,30 @@
+"""The benchmark command runs and writes a well-formed bench.json (timings are not asserted)."""
+
+import json
+
+from mpi4py import MPI
+
+from app import cli
+
+
+def test_bench_writes_well_formed_json(shared_tmp):
+    out = shared_tmp / "bench"
+    assert cli.main(["bench", "--sizes", "coarse", "-o", str(out), "-q", "--set", "geometry.length=0.2"]) == 0
+    doc = json.loads((out / "bench.json").read_text())
+    run = doc["runs"][str(MPI.COMM_WORLD.size)]["sizes"]["coarse"]
+    assert run["dofs"] > 0 and run["steps"] > 0 and run["newton_iterations"] >= run["steps"]
+    assert run["factorizations"] >= run["newton_iterations"]  # one per Newton iteration at least
+    assert run["R"] > 0 and run["t_factor_s"] > 0
+    split = run["per_step_split_s"]
+    assert set(split) >= {"assembly", "factorization", "triangular_solves", "stability_test", "eigen_solve",
+                          "output", "other"}
+    assert all(v >= 0 for v in split.values())
+    assert sum(split.values()) * run["steps"] <= run["wall_time_s"] * 1.01
+    assert len(run["peak_rss_mb_per_rank"]) == MPI.COMM_WORLD.size
+    assert run["g_c_um"] > 0
+    assert "| coarse |" in (out / "bench.md").read_text()
+
+
+def test_bench_rejects_bad_sizes(capsys):
+    assert cli.main(["bench", "--sizes", "huge"]) == 2
+    assert cli.main(["bench", "--ranks", "0,x"]) == 2
