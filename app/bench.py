@@ -120,7 +120,9 @@ def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdi
         with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
             tmp = f.name
         cmd = ["mpirun", "-n", str(k), "--oversubscribe", sys.executable, "-m", "app", "bench", "--sizes",
-               ",".join(sizes), "-o", str(outdir), "--json-only", tmp, "-q"] + sum((["--set", o] for o in overrides), [])
+               ",".join(sizes), "-o", str(outdir), "--json-only", tmp, "-q"]
+        for o in overrides:
+            cmd += ["--set", o]
         env = dict(os.environ)
         if os.getuid() == 0:
             env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")

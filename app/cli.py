@@ -228,8 +228,8 @@ def cmd_sweep(args) -> int:
 
 def _check_ranks(args, comm) -> None:
     if not 1 <= args.ranks_per_case <= comm.size:
-        raise config.ConfigError("--ranks-per-case", f"= {args.ranks_per_case} is out of range; allowed: 1..{comm.size} "
-                                 "(the number of MPI ranks)")
+        raise config.ConfigError("--ranks-per-case", f"= {args.ranks_per_case} is out of range; "
+                                 f"allowed: 1..{comm.size} (the number of MPI ranks)")
 
 
 def _study_exit(rows, outdir, comm) -> int:

@@ -7,14 +7,14 @@ should only need to touch this module.
 
 from __future__ import annotations
 
+import dolfinx
 import numpy as np
 import ufl
-from dolfinx import fem, mesh as dmesh
+from dolfinx import fem
+from dolfinx import mesh as dmesh
 from dolfinx.fem import petsc as fem_petsc
 from dolfinx.io import XDMFFile, gmshio  # gmshio must be imported explicitly in 0.5
 from petsc4py import PETSc
-
-import dolfinx
 
 DOLFINX_VERSION = dolfinx.__version__
 ScalarType = PETSc.ScalarType

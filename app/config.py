@@ -10,9 +10,10 @@ from __future__ import annotations
 import copy
 import math
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 
 class ConfigError(ValueError):
@@ -368,7 +369,7 @@ def _validate_msh(cfg: dict) -> None:
     if not layers:
         raise ConfigError("geometry.layers", "must map cell physical groups to materials, e.g. "
                           "{ film = \"film\", substrate = \"substrate\" }")
-    known = {"film", "substrate"} | set((cfg["material"].get("layers") or {}))
+    known = {"film", "substrate"} | set(cfg["material"].get("layers") or {})
     for group, mat in layers.items():
         if mat not in known:
             raise ConfigError(f"geometry.layers.{group}", f"= {mat!r} is not a material; allowed: "

@@ -30,7 +30,7 @@ class Hydrogel:
     interaction: float  # chi
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Hydrogel":
+    def from_dict(cls, d: dict) -> Hydrogel:
         return cls(**{k: float(d[k]) for k in cls.__dataclass_fields__})
 
     def as_dict(self) -> dict:

@@ -203,7 +203,7 @@ def _max():
     return MPI.MAX
 
 
-def _gather_cells(problem, base: "np.ndarray", mode: "np.ndarray"):
+def _gather_cells(problem, base: np.ndarray, mode: np.ndarray):
     """On rank 0: (vertex coordinates, base displacement, mode) per owned cell, polygon-ordered."""
     import numpy as np
 

@@ -4,12 +4,11 @@ and the stress-free preswollen reference state (zero residual at t = 0)."""
 import numpy as np
 import pytest
 import ufl
-from mpi4py import MPI
+from conftest import small_bilayer
 from petsc4py import PETSc
 
 from app import compat
 from app.problem import Problem
-from conftest import small_bilayer
 
 
 def distorted_mesh(comm, n=6):

@@ -8,8 +8,13 @@ import ufl
 from mpi4py import MPI
 
 from app import compat
-from app.material import (Hydrogel, chemical_potential, constrained_layer_fluid, constrained_layer_stretch,
-                          free_energy)
+from app.material import (
+    Hydrogel,
+    chemical_potential,
+    constrained_layer_fluid,
+    constrained_layer_stretch,
+    free_energy,
+)
 
 PAPER = dict(mixing_modulus=24.2, penalty=10.0, mobility=1e-4, preswelling=1.01, interaction=0.1)
 

@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
+from conftest import small_bilayer
 from mpi4py import MPI
 
 from app.problem import Problem
 from app.stepping import StepRecord, TimeStepper
-from conftest import small_bilayer
 
 COLUMNS = [c for c in StepRecord.COLUMNS if c not in ("step", "newton_its", "error_estimate")]
 
@@ -37,8 +37,9 @@ def test_distributed_history_equals_serial(kind):
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run with a serial one")
 def test_distributed_onset_equals_serial(shared_tmp):
-    from app.run import simulate
     from test_stability import swelling_case
+
+    from app.run import simulate
 
     cfg = swelling_case()
     world = MPI.COMM_WORLD

@@ -4,13 +4,13 @@ early-time behaviour through the error-controlled stepping."""
 
 import numpy as np
 import pytest
+from conftest import small_bilayer
 from scipy.optimize import brentq
 
 from app import config
 from app.material import Hydrogel, constrained_layer_stretch
 from app.problem import Problem
 from app.stepping import TimeStepper
-from conftest import small_bilayer
 
 
 def _run(cfg, comm):

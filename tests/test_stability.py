@@ -3,9 +3,7 @@
 import csv
 import json
 
-import numpy as np
 import pytest
-from mpi4py import MPI
 
 from app import config
 from app.run import simulate

@@ -6,10 +6,10 @@ import json
 
 import pytest
 from mpi4py import MPI
-
-from app import cli, studies
 from test_stability import SWELLING
 from test_tubes import SMALL_TUBE
+
+from app import cli, studies
 
 
 def _sweep(outdir, comm, param, values, base=SWELLING, overrides=(), ranks_per_case=1, force=False):

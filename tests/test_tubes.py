@@ -6,7 +6,6 @@ import math
 import numpy as np
 import pytest
 import ufl
-from mpi4py import MPI
 
 from app import compat, config
 from app.problem import Problem
