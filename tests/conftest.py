@@ -47,3 +47,17 @@ def small_bilayer(**overrides) -> dict:
         "output": {"fields": False, "plot": False},
     }
     return config.resolve(user, [f"{k}={v}" for k, v in overrides.items()])
+
+
+def run_to_end(cfg: dict, comm):
+    """Integrate a config to time.end without the stability test: (problem, stepper, records)."""
+    from app.problem import Problem
+    from app.stepping import TimeStepper
+
+    p = Problem(cfg, comm)
+    st = TimeStepper(p, cfg)
+    rows = [st.initial_record()]
+    while not st.done():
+        rows.append(st.advance())
+    st.solver.destroy()
+    return p, st, rows

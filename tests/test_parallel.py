@@ -2,22 +2,16 @@
 
 import numpy as np
 import pytest
-from conftest import small_bilayer
+from conftest import run_to_end, small_bilayer
 from mpi4py import MPI
 
-from app.problem import Problem
-from app.stepping import StepRecord, TimeStepper
+from app.stepping import StepRecord
 
 COLUMNS = [c for c in StepRecord.COLUMNS if c not in ("step", "newton_its", "error_estimate")]
 
 
 def _history(cfg, comm):
-    p = Problem(cfg, comm)
-    st = TimeStepper(p, cfg)
-    rows = [st.initial_record()]
-    while not st.done():
-        rows.append(st.advance())
-    st.solver.destroy()
+    _, _, rows = run_to_end(cfg, comm)
     return np.array([[getattr(r, c) for c in COLUMNS] for r in rows])
 
 

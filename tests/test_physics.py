@@ -4,23 +4,15 @@ early-time behaviour through the error-controlled stepping."""
 
 import numpy as np
 import pytest
-from conftest import small_bilayer
+from conftest import run_to_end, small_bilayer
 from scipy.optimize import brentq
 
 from app import config
 from app.material import Hydrogel, constrained_layer_stretch
-from app.problem import Problem
-from app.stepping import TimeStepper
 
 
 def _run(cfg, comm):
-    p = Problem(cfg, comm)
-    st = TimeStepper(p, cfg)
-    rows = [st.initial_record()]
-    while not st.done():
-        rows.append(st.advance())
-    st.solver.destroy()
-    return p, st, rows
+    return run_to_end(cfg, comm)
 
 
 def test_fluid_volume_balance_during_swelling(comm):
