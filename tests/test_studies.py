@@ -80,3 +80,17 @@ def test_trend_tube_substrate_thickness(shared_tmp, comm):
     rows, _ = _sweep(shared_tmp / "H", comm, "geometry.substrate_thickness", [0.04, 0.1], base=SMALL_TUBE)
     assert rows[0]["g_c_um"] > rows[1]["g_c_um"]
     assert json.loads((shared_tmp / "H" / rows[0]["directory"] / "summary.json").read_text())["status"] == "buckled"
+
+
+def test_isomodes_record_later_crossings_in_order(shared_tmp, comm):
+    out = shared_tmp / "iso"
+    cases = studies.build_cases(SWELLING, "geometry.film_thickness", [0.008, 0.012], out,
+                                ["stability.max_crossings=3"], isomodes=True)
+    rows = studies.run_study(cases, out, comm, "test", "geometry.film_thickness")
+    for r in rows:
+        crossings = [c.split("@") for c in r["crossings"].split(";")]
+        assert len(crossings) == 3
+        growths = [float(g) for _, g in crossings]
+        assert growths == sorted(growths)  # later crossings at larger growth along the path
+        assert growths[0] == pytest.approx(r["g_c_um"], rel=1e-4)
+    assert (out / "isomodes.png").stat().st_size > 0
