@@ -280,6 +280,7 @@ def cmd_bench(args) -> int:
         text = bench.table(doc)
         (outdir / "bench.md").write_text(text + "\n")
         print(text)
+    comm.barrier()  # every rank may read bench.json once the command returns
     return EXIT_OK
 
 

@@ -124,7 +124,10 @@ class Problem:
                     if c < n_owned and int(c) in group_of_cell:
                         name = self.geo.layers[group_of_cell[int(c)]]
                         counts[name] = counts.get(name, 0) + 1
-        totals = self.comm.allreduce(counts, op=_merge_counts())
+        totals: dict[str, int] = {}
+        for part in self.comm.allgather(counts):
+            for k, v in part.items():
+                totals[k] = totals.get(k, 0) + v
         return max(sorted(totals), key=lambda k: totals[k]) if totals else "film"
 
     def _boundary_conditions(self):
@@ -231,18 +234,6 @@ class Problem:
 
     def cells(self) -> int:
         return compat.num_global_cells(self.domain)
-
-
-def _merge_counts():
-    from mpi4py import MPI
-
-    def merge(a, b, datatype=None):
-        out = dict(a)
-        for k, v in b.items():
-            out[k] = out.get(k, 0) + v
-        return out
-
-    return MPI.Op.Create(merge, commute=True)
 
 
 def _mpi_min():
