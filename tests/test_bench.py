@@ -14,6 +14,7 @@ def test_bench_writes_well_formed_json(shared_tmp):
     run = doc["runs"][str(MPI.COMM_WORLD.size)]["sizes"]["coarse"]
     assert run["dofs"] > 0 and run["steps"] > 0 and run["newton_iterations"] >= run["steps"]
     assert run["factorizations"] >= run["newton_iterations"]  # one per Newton iteration at least
+    assert run["stability_tests"] >= run["steps"]  # one per accepted step, more in the bisection
     assert run["R"] > 0 and run["t_factor_s"] > 0
     split = run["per_step_split_s"]
     assert set(split) >= {"assembly", "factorization", "triangular_solves", "stability_test", "eigen_solve",
