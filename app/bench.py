@@ -2,12 +2,14 @@
 
 Per accepted step the time splits into form assembly, factorizations and triangular solves (of the
 Newton iterations, from PETSc's event log), the stability test (K on the free dofs and its LDL^T
-inertia), eigen-solves, output and other. R = (time of the time loop) / ((Newton factorizations + stability tests) t_factor), with t_factor the mean
-time of one numeric factorization of the Newton K in the same run, and the counts over every solve the run
-made (accepted, rejected and bisection steps): R = 1 means the run costs exactly its factorizations (one per
-Newton iteration plus one per stability test). ``R_accepted_steps`` is the same ratio with the Newton
-iterations of the accepted steps only, as written in history.csv (larger: it leaves out the rejected and
-bisection solves).
+inertia), eigen-solves, output and other.
+
+R = (time of the time loop) / ((Newton factorizations + stability tests) x t_factor), with t_factor the
+mean time of one numeric factorization of the Newton K in the same run and the counts over every solve
+the run made (accepted, rejected and bisection steps): R = 1 means the run costs exactly its
+factorizations, one per Newton iteration plus one per stability test. ``R_accepted_steps`` is the same
+ratio with only the Newton iterations of the accepted steps (as in history.csv); it is larger because it
+leaves the rejected and bisection solves out of the bound but not out of the time.
 """
 
 from __future__ import annotations
