@@ -29,3 +29,13 @@ def test_bench_writes_well_formed_json(shared_tmp):
 def test_bench_rejects_bad_sizes(capsys):
     assert cli.main(["bench", "--sizes", "huge"]) == 2
     assert cli.main(["bench", "--ranks", "0,x"]) == 2
+
+
+def test_bench_counts_each_size_separately(shared_tmp):
+    """PETSc's event log is cumulative: two sizes in one process must not add up."""
+    out = shared_tmp / "bench2"
+    args = ["bench", "--sizes", "coarse,coarse", "-o", str(out), "-q", "--set", "geometry.length=0.2"]
+    assert cli.main(args) == 0
+    # both entries are the same size: the JSON keeps one, but the run before it must not leak in
+    run = json.loads((out / "bench.json").read_text())["runs"][str(MPI.COMM_WORLD.size)]["sizes"]["coarse"]
+    assert run["factorizations"] <= 2 * run["newton_iterations"]
