@@ -124,11 +124,6 @@ def cells_with_tag(cell_tags, tag: int) -> np.ndarray:
     return cell_tags.indices[cell_tags.values == tag]
 
 
-def make_meshtags(domain, dim: int, indices, values):
-    indices = np.asarray(indices, dtype=np.int32)
-    values = np.asarray(values, dtype=np.int32)
-    order = np.argsort(indices)
-    return dmesh.meshtags(domain, dim, indices[order], values[order])
 
 
 # --- forms, assembly, boundary conditions ----------------------------------------------
@@ -216,10 +211,6 @@ def expression(ufl_expr, V):
     return fem.Expression(ufl_expr, V.element.interpolation_points())
 
 
-def set_vector_from_array(vec: PETSc.Vec, f: fem.Function) -> None:
-    """Copy the owned part of ``f`` into ``vec``."""
-    n = owned_size(f.function_space)
-    vec.array[:] = f.x.array[:n]
 
 
 # --- IO --------------------------------------------------------------------------------
@@ -227,7 +218,3 @@ def set_vector_from_array(vec: PETSc.Vec, f: fem.Function) -> None:
 
 def xdmf_writer(comm, path: str):
     return XDMFFile(comm, path, "w")
-
-
-def xdmf_reader(comm, path: str):
-    return XDMFFile(comm, path, "r")

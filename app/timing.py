@@ -9,7 +9,6 @@ from collections import defaultdict
 
 from petsc4py import PETSc
 
-CATEGORIES = ("assembly", "factorization", "triangular_solves", "stability_test", "eigen_solve", "output")
 FACTOR_EVENTS = ("MatLUFactorSym", "MatLUFactorNum", "MatCholFctrSym", "MatCholFctrNum")
 SOLVE_EVENTS = ("MatSolve",)
 
