@@ -153,6 +153,8 @@ SCHEMA: dict[str, dict[str, Key] | dict] = {
         "modes": _key(int, 3, _in_closed(1, 50), "eigenpairs reported at the onset"),
         "eigen_every": _key(int, 0, _ge(0), "also compute lambda_min every n steps (0 = only at the onset)"),
         "tau": _key(float, 1.0e-2, _gt(0), "increment of the dissipation block of K [s]"),
+        "screening": _key(str, "newton", _one_of("newton", "exact"),
+                          "per-step test: inertia of the Newton factor (confirmed exactly) or exact K"),
         "max_crossings": _key(int, 20, _ge(1), "with stop_at_onset = false: stop after this many"),
         "error_estimate": _key(bool, True, None,
                                "estimate g_c's discretization error with two coarsened companion runs"),

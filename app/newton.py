@@ -51,8 +51,14 @@ class NewtonSolver:
             # K is symmetric (a Hessian): MUMPS LDL^T, valid also where K is indefinite (past an onset)
             "pc_type": factorization,
             "pc_factor_mat_solver_type": "mumps",
+            # inertia of the factor (stability screening): null-pivot detection, and no ScaLAPACK
+            # on the root node, without which MUMPS cannot count negative pivots in parallel
+            "mat_mumps_icntl_24": 1,
+            "mat_mumps_icntl_13": 1,
         }.items():
             opts[self.prefix + key] = value
+        self.factorization = factorization
+        self.last_iterations = 0
         self.snes = PETSc.SNES().create(problem.comm)
         self.snes.setOptionsPrefix(self.prefix)
         self.snes.setFunction(self._residual, self.b)
@@ -88,11 +94,24 @@ class NewtonSolver:
         except PETSc.Error:
             reason = -100
         its = self.snes.getIterationNumber()
+        self.last_iterations = its
         if reason > 0:
             self._sync_solution(self.x)
         fnorm = self.snes.getFunctionNorm() if reason != -100 else float("nan")
         converged = reason > 0 and np.isfinite(fnorm)
         return NewtonResult(converged, its, reason, float(fnorm))
+
+    def factor_inertia(self) -> tuple[int, int, int] | None:
+        """(negative, zero, positive) pivot counts of the last LDL^T factorization of the last solve.
+
+        That factor is K at the last Newton iterate (one update short of the converged state) with
+        the step's tau, Dirichlet rows and columns replaced by a unit diagonal (which adds only
+        positive eigenvalues). None if the last solve factorized nothing or used LU."""
+        if self.factorization != "cholesky" or self.last_iterations < 1:
+            return None
+        F = self.snes.getKSP().getPC().getFactorMatrix()
+        nneg, nzero, npos = F.getInertia()
+        return int(nneg), int(nzero), int(npos)
 
     def destroy(self) -> None:
         for obj in (self.snes, self.A, self.b, self.x):

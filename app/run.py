@@ -6,7 +6,7 @@ import time
 from dataclasses import asdict
 
 from app import logging_setup
-from app.onset import Crossing, locate_crossing
+from app.onset import Crossing, CrossingDetector, locate_crossing
 from app.output import ResultWriter, versions
 from app.problem import Problem
 from app.stability import StabilityAnalyzer
@@ -47,23 +47,27 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         writer.setup_fields(problem)
     first = stepper.initial_record()
     count = 0
+    detector = None
     if analyzer is not None:
-        count = analyzer.inertia()[0]
+        detector = CrossingDetector(stepper, analyzer, scfg["screening"], log=log.info if progress else log.debug)
+        count = detector.start()
         first.extra.update({"negative_eigenvalues": count, "lambda_min": float("nan")})
     writer.history_row(row_of(first))
     if out["fields"]:
         writer.write_fields(0.0)
     status, message = "completed", ""
     crossings: list[Crossing] = []
-    snap_prev = stepper.snapshot()
     try:
         while not stepper.done():
             rec = stepper.advance()
             if out["fields"] and rec.step % out["every"] == 0:
                 writer.write_fields(rec.time)
-            nneg = None
-            if analyzer is not None:
-                nneg = analyzer.inertia()[0]
+            nneg, bracket = None, None
+            if detector is not None:
+                nneg = detector.screen()
+                if nneg > count:
+                    bracket = detector.confirm(count, nneg)
+                    nneg = bracket[0] if bracket is not None else count
                 lam = float("nan")
                 if scfg["eigen_every"] and rec.step % scfg["eigen_every"] == 0:
                     lam = analyzer.lambda_min(nneg)
@@ -72,11 +76,11 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
             (log.info if progress else log.debug)(f"step {rec.step:5d}  t = {rec.time:10.5f} s  dt = {rec.dt:9.3e} s  "
                      f"newton {rec.newton_its:2d}  growth = {1e3 * rec.growth_mm:9.4f} um  "
                      f"mu_bar = {rec.mu_bar:9.3f} MPa" + (f"  neg.eig. {nneg}" if nneg is not None else ""))
-            if nneg is not None and nneg > count:
-                snap_unstable = stepper.snapshot()
-                log.info(f"  K lost positive definiteness between t = {snap_prev.t:.6f} and {rec.time:.6f} s "
+            if bracket is not None:
+                nneg, lo, snap_unstable = bracket
+                log.info(f"  K lost positive definiteness between t = {lo.t:.6f} and {rec.time:.6f} s "
                          f"({nneg - count} new negative eigenvalue(s))")
-                lo, stop = snap_prev, False
+                stop = False
                 while count < nneg:  # one bisection per new negative eigenvalue
                     crossing = locate_crossing(stepper, analyzer, lo, snap_unstable, count, scfg["tolerance"],
                                                scfg["modes"], log=log.info if progress else log.debug)
@@ -94,7 +98,9 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
                 stepper.restore(snap_unstable)
                 if stop:
                     break
-            snap_prev = stepper.snapshot()
+                detector.restart(snap_unstable)
+            elif detector is not None:
+                detector.accepted(stepper.snapshot())
     except StepFailure as err:
         status, message = "failed", str(err)
         log.info(f"hydrobuckle: solver failure: {message}")
@@ -114,6 +120,9 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         "steps": stepper.step,
         "rejected_steps": stepper.rejected,
         "failed_solves": stepper.failed_solves,
+        **({"stability_tests": {"screening": scfg["screening"], "screened_steps": detector.screened_steps,
+                                "exact_tests": analyzer.tests, "false_alarms": detector.false_alarms}}
+           if detector is not None else {}),
         "wall_time_s": time.perf_counter() - wall0,
         "versions": versions(),
         "assumptions": list(ASSUMPTIONS),

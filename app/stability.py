@@ -42,6 +42,7 @@ class StabilityAnalyzer:
         self._ksp = None
         self._full = compat.create_vector(problem.forms.residual)
         self.n_free = self.is_free.getSize()
+        self.tests = 0  # exact inertia tests (each one LDL^T factorization)
 
     def _free_index_set(self) -> PETSc.IS:
         W = self.p.W
@@ -78,6 +79,7 @@ class StabilityAnalyzer:
 
     def inertia(self) -> tuple[int, int, int]:
         """(negative, zero, positive) eigenvalue counts of K on the free dofs."""
+        self.tests += 1
         with timing.timed("stability_test"):
             return self._inertia()
 
