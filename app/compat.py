@@ -161,6 +161,18 @@ def bc_dof_indices(bc) -> np.ndarray:
     return np.asarray(idx, dtype=np.int32)
 
 
+def owned_bc_dofs(bcs, W) -> np.ndarray:
+    """Owned indices (in the local array of W) constrained by any of ``bcs``."""
+    n_owned = W.dofmap.index_map.size_local * W.dofmap.index_map_bs
+    idx = np.concatenate([bc_dof_indices(bc) for bc in bcs]) if bcs else np.empty(0, np.int32)
+    return np.unique(idx[idx < n_owned]).astype(np.int32)
+
+
+def set_dirichlet_values(x, bcs) -> None:
+    """x[constrained dofs] = their prescribed values (owned entries)."""
+    fem_petsc.set_bc(x, bcs)
+
+
 def create_matrix(a):
     return fem_petsc.create_matrix(a)
 
@@ -175,12 +187,14 @@ def assemble_matrix_into(A, a, bcs, diagonal: float = 1.0):
     A.assemble()
 
 
-def assemble_residual_into(b, L, a, bcs, x):
-    """b = L(x) with Dirichlet rows set to (x_bc - x) * -1, the standard Newton lifting."""
+def assemble_residual_into(b, L, a, bcs, x, lifting: bool = True):
+    """b = L(x) with Dirichlet rows set to x_bc - g; with ``lifting`` also b += K (g - x) on the
+    constrained columns (the standard Newton lifting; zero when x already meets the conditions)."""
     with b.localForm() as b_local:
         b_local.set(0.0)
     fem_petsc.assemble_vector(b, L)
-    fem_petsc.apply_lifting(b, [a], bcs=[bcs], x0=[x], scale=-1.0)
+    if lifting:
+        fem_petsc.apply_lifting(b, [a], bcs=[bcs], x0=[x], scale=-1.0)
     b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
     fem_petsc.set_bc(b, bcs, x, -1.0)
 

@@ -37,6 +37,9 @@ class NewtonSolver:
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         self.b = compat.create_vector(forms.residual)
         self.x = self.b.duplicate()
+        self._g = self.b.duplicate()  # Dirichlet values at the constrained dofs, 0 elsewhere
+        self._bc_dofs = compat.owned_bc_dofs(problem.bcs, problem.W)
+        self._lifting = True
         self.prefix = f"hb{next(_ids)}_"
         opts = PETSc.Options()
         for key, value in {
@@ -77,7 +80,19 @@ class NewtonSolver:
         with timing.timed("assembly"):
             self._sync_solution(x)
             compat.assemble_residual_into(b, self.problem.forms.residual, self.problem.forms.hessian,
-                                          self.problem.bcs, x)
+                                          self.problem.bcs, x, lifting=self._lifting)
+
+    def _needs_lifting(self, x: PETSc.Vec) -> bool:
+        """Whether the initial guess misses the Dirichlet values (then the residual needs the lifting
+        term K (g - x); once every iterate meets them, that term is zero and skipped)."""
+        g = self._g
+        g.set(0.0)
+        compat.set_dirichlet_values(g, self.problem.bcs)
+        idx = self._bc_dofs
+        local = float(np.max(np.abs(x.array[idx] - g.array[idx]))) if idx.size else 0.0
+        scale = float(np.max(np.abs(g.array[idx]))) if idx.size else 0.0
+        comm = self.problem.comm
+        return comm.allreduce(local, op=_mpi_max()) > 1e-13 * max(1.0, comm.allreduce(scale, op=_mpi_max()))
 
     def _jacobian(self, snes, x, J, P):
         with timing.timed("assembly"):
@@ -87,6 +102,9 @@ class NewtonSolver:
         """Solve from the current ``problem.w`` as initial guess; ``problem.w`` holds the result."""
         w_vec = compat.function_vector(self.problem.w)
         w_vec.copy(self.x)
+        self._lifting = self._needs_lifting(self.x)
+        if not self._lifting:
+            compat.set_dirichlet_values(self.x, self.problem.bcs)  # exact, not just to round-off
         try:
             with timing.timed("newton"):
                 self.snes.solve(None, self.x)
@@ -116,3 +134,9 @@ class NewtonSolver:
     def destroy(self) -> None:
         for obj in (self.snes, self.A, self.b, self.x):
             obj.destroy()
+
+
+def _mpi_max():
+    from mpi4py import MPI
+
+    return MPI.MAX

@@ -147,3 +147,32 @@ def test_residual_vanishes_in_the_reference_state(comm, ratio):
         # so each interface facet's row is +-jump; the norm over all interface facets follows.
         n_facets = round(p.cfg["geometry"]["length"] / p.cfg["mesh"]["element_size"])
         assert nq == pytest.approx(jump * np.sqrt(n_facets), rel=1e-8)
+
+
+def test_residual_lifting_vanishes_once_the_iterate_meets_the_dirichlet_values(comm):
+    """The Newton solver skips the lifting term K (g - x) when x meets the Dirichlet values: the
+    residual is then the same with and without it; where x misses them the term matters."""
+    p = Problem(small_bilayer(), comm)
+    rng = np.random.default_rng(5 + comm.rank)
+    p.w.x.array[p.u_dofs] = 1e-4 * rng.standard_normal(len(p.u_dofs))
+    p.w.x.array[p.q_dofs] = 1e-7 * rng.standard_normal(len(p.q_dofs))
+    p.w.x.scatter_forward()
+    p.set_time(0.3, 0.01)
+    x = compat.function_vector(p.w)
+
+    def residuals():
+        out = []
+        for lifting in (True, False):
+            b = compat.create_vector(p.forms.residual)
+            compat.assemble_residual_into(b, p.forms.residual, p.forms.hessian, p.bcs, x, lifting=lifting)
+            out.append(b)
+        return out
+
+    with_lift, without = residuals()  # x misses the (zero) Dirichlet values
+    without.axpy(-1.0, with_lift)
+    assert without.norm() > 1e-3 * with_lift.norm()
+    compat.set_dirichlet_values(x, p.bcs)
+    x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+    with_lift, without = residuals()
+    without.axpy(-1.0, with_lift)
+    assert without.norm() <= 1e-14 * with_lift.norm()
