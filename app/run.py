@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from dataclasses import asdict
 
-from app import logging_setup
+from app import logging_setup, timing
 from app.onset import Crossing, CrossingDetector, locate_crossing
 from app.output import ResultWriter, versions
 from app.problem import Problem
@@ -33,15 +33,16 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     wall0 = time.perf_counter()
     columns = StepRecord.COLUMNS + (("negative_eigenvalues", "lambda_min") if cfg["stability"]["enabled"] else ())
     writer = ResultWriter(outdir, comm, cfg, columns=columns)
-    if problem is None:
-        problem = Problem(cfg, comm)
+    scfg = cfg["stability"]
+    with timing.timed("setup"):
+        if problem is None:
+            problem = Problem(cfg, comm)
+        stepper = TimeStepper(problem, cfg, log=log.info)
+        analyzer = StabilityAnalyzer(problem, scfg["tau"]) if scfg["enabled"] else None
     mats = problem.materials
     log.info(f"hydrobuckle: {cfg['geometry']['kind']} mesh with {problem.cells()} cells, {problem.dofs()} dofs "
              f"on {comm.size} rank(s); film mu0 = {mats['film'].mu0:.4f} MPa, "
              f"substrate mu0 = {mats['substrate'].mu0:.4f} MPa")
-    stepper = TimeStepper(problem, cfg, log=log.info)
-    scfg = cfg["stability"]
-    analyzer = StabilityAnalyzer(problem, scfg["tau"]) if scfg["enabled"] else None
     out = cfg["output"]
     if out["fields"]:
         writer.setup_fields(problem)
