@@ -145,6 +145,10 @@ SCHEMA: dict[str, dict[str, Key] | dict] = {
         "max_it": _key(int, 25, _in_closed(1, 1000), "Newton iterations per step"),
         "factorization": _key(str, "cholesky", _one_of("cholesky", "lu"),
                               "direct solver of each Newton step (MUMPS LDL^T or LU)"),
+        "linear": _key(str, "direct", _one_of("direct", "iterative"),
+                       "Newton's linear solves: MUMPS factorization, or preconditioned Krylov (large meshes)"),
+        "ksp_rtol": _key(float, 1.0e-10, _in_open(0.0, 1.0), "relative tolerance of the iterative linear solves"),
+        "ksp_max_it": _key(int, 2000, _ge(1), "iterations per iterative linear solve"),
     },
     "stability": {
         "enabled": _key(bool, True, None, "test K for positive definiteness after every step"),

@@ -11,6 +11,10 @@ packages=(
   python3-mpi4py openmpi-bin libopenmpi-dev
   python3-pytest python3-pytest-mpi python3-matplotlib python3-scipy python3-venv python3-tqdm
   python3-pip python3-setuptools python3-wheel
+  # optimized single-threaded BLAS/LAPACK: Debian's alternatives switch PETSc/MUMPS to it from the
+  # reference BLAS, ~3x faster factorizations (docs/performance.md); serial, so MPI ranks don't
+  # oversubscribe cores with BLAS threads
+  libopenblas0-serial
 )
 
 missing=()
