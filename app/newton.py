@@ -30,7 +30,8 @@ class NewtonSolver:
     """SNES (newtonls) on R(w) = 0 with Jacobian K; w is ``problem.w``."""
 
     def __init__(self, problem, rtol: float, atol: float, max_it: int, line_search: str = "basic",
-                 factorization: str = "cholesky"):
+                 factorization: str = "cholesky", linear: str = "direct", ksp_rtol: float = 1e-10,
+                 ksp_max_it: int = 2000):
         self.problem = problem
         forms = problem.forms
         self.A = compat.create_matrix(forms.hessian)
@@ -42,7 +43,7 @@ class NewtonSolver:
         self._lifting = True
         self.prefix = f"hb{next(_ids)}_"
         opts = PETSc.Options()
-        for key, value in {
+        settings = {
             "snes_type": "newtonls",
             "snes_linesearch_type": line_search,
             "snes_rtol": rtol,
@@ -50,6 +51,30 @@ class NewtonSolver:
             "snes_stol": 0.0,
             "snes_max_it": max_it,
             "snes_max_funcs": 100 * max_it,
+        }
+        settings.update(self._direct_options(factorization) if linear == "direct"
+                        else self._iterative_options(ksp_rtol, ksp_max_it))
+        for key, value in settings.items():
+            opts[self.prefix + key] = value
+        self.factorization = factorization if linear == "direct" else None
+        self.linear = linear
+        self.last_iterations = 0
+        self.linear_iterations = 0  # Krylov iterations of all solves (iterative mode)
+        self.snes = PETSc.SNES().create(problem.comm)
+        self.snes.setOptionsPrefix(self.prefix)
+        self.snes.setFunction(self._residual, self.b)
+        self.snes.setJacobian(self._jacobian, self.A)
+        self.snes.setFromOptions()
+        ksp = self.snes.getKSP()
+        ksp.setFromOptions()
+        if linear == "iterative":
+            u_is, q_is = self._field_index_sets()
+            ksp.getPC().setFieldSplitIS(("u", u_is), ("q", q_is))
+        ksp.getPC().setFromOptions()
+
+    @staticmethod
+    def _direct_options(factorization: str) -> dict:
+        return {
             "ksp_type": "preonly",
             # K is symmetric (a Hessian): MUMPS LDL^T, valid also where K is indefinite (past an onset)
             "pc_type": factorization,
@@ -58,17 +83,40 @@ class NewtonSolver:
             # on the root node, without which MUMPS cannot count negative pivots in parallel
             "mat_mumps_icntl_24": 1,
             "mat_mumps_icntl_13": 1,
-        }.items():
-            opts[self.prefix + key] = value
-        self.factorization = factorization
-        self.last_iterations = 0
-        self.snes = PETSc.SNES().create(problem.comm)
-        self.snes.setOptionsPrefix(self.prefix)
-        self.snes.setFunction(self._residual, self.b)
-        self.snes.setJacobian(self._jacobian, self.A)
-        self.snes.setFromOptions()
-        self.snes.getKSP().setFromOptions()
-        self.snes.getKSP().getPC().setFromOptions()
+        }
+
+    @staticmethod
+    @staticmethod
+    def _iterative_options(rtol: float, max_it: int) -> dict:
+        """MINRES (K is symmetric, indefinite past an onset) with a block-diagonal (additive field-split)
+        preconditioner, BoomerAMG on the displacement and on the flux block: symmetric positive
+        definite where K is. Measured against MUMPS in docs/performance.md (far slower near an onset,
+        where K is nearly singular: a memory-saving fallback, not the default)."""
+        return {
+            "ksp_type": "minres",
+            "ksp_rtol": rtol,
+            "ksp_atol": 0.0,
+            "ksp_max_it": max_it,
+            "pc_type": "fieldsplit",
+            "pc_fieldsplit_type": "additive",
+            "fieldsplit_u_ksp_type": "preonly",
+            "fieldsplit_u_pc_type": "hypre",
+            "fieldsplit_u_pc_hypre_type": "boomeramg",
+            "fieldsplit_q_ksp_type": "preonly",
+            "fieldsplit_q_pc_type": "hypre",
+            "fieldsplit_q_pc_hypre_type": "boomeramg",
+        }
+
+    def _field_index_sets(self):
+        """Global indices of the owned displacement and flux dofs of the mixed space."""
+        p = self.problem
+        n_owned = compat.owned_size(p.W)
+        start = p.W.dofmap.index_map.local_range[0] * p.W.dofmap.index_map_bs
+        sets = []
+        for dofs in (p.u_dofs, p.q_dofs):
+            owned = np.sort(dofs[dofs < n_owned]) + start
+            sets.append(PETSc.IS().createGeneral(owned.astype(PETSc.IntType), comm=p.comm))
+        return sets
 
     def _sync_solution(self, x: PETSc.Vec) -> None:
         w = self.problem.w
@@ -113,6 +161,7 @@ class NewtonSolver:
             reason = -100
         its = self.snes.getIterationNumber()
         self.last_iterations = its
+        self.linear_iterations += self.snes.getLinearSolveIterations()
         if reason > 0:
             self._sync_solution(self.x)
         fnorm = self.snes.getFunctionNorm() if reason != -100 else float("nan")

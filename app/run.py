@@ -121,6 +121,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         "steps": stepper.step,
         "rejected_steps": stepper.rejected,
         "failed_solves": stepper.failed_solves,
+        "linear_solver": {"kind": cfg["solver"]["linear"], "krylov_iterations": stepper.solver.linear_iterations},
         **({"stability_tests": {"screening": scfg["screening"], "screened_steps": detector.screened_steps,
                                 "exact_tests": analyzer.tests, "false_alarms": detector.false_alarms}}
            if detector is not None else {}),

@@ -81,7 +81,8 @@ class TimeStepper:
         self.dt_fixed = tcfg["dt_initial"]
         self.max_steps = tcfg["max_steps"]
         self.solver = NewtonSolver(problem, scfg["rtol"], scfg["atol"], scfg["max_it"],
-                                   factorization=scfg["factorization"])
+                                   factorization=scfg["factorization"], linear=scfg["linear"],
+                                   ksp_rtol=scfg["ksp_rtol"], ksp_max_it=scfg["ksp_max_it"])
         self.log = log or (lambda msg: None)
         self.kinks = sorted(k for k in problem.loading.kinks() if 0 < k < self.end)
 
