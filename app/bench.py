@@ -28,7 +28,7 @@ from pathlib import Path
 
 from app import config, logging_setup, timing
 
-SIZES = {"coarse": 2.0, "default": 1.0, "fine": 0.7}  # element size x s, film layers / s
+SIZES = {"coarse": 2.0, "default": 1.0, "fine": 0.7, "finer": 0.5}  # element size x s, film layers / s
 
 
 def size_config(name: str, overrides: list[str]) -> dict:
@@ -150,10 +150,18 @@ def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdi
     return out
 
 
+def blas_library() -> str:
+    """The BLAS library PETSc/MUMPS load (Debian's alternatives link), which sets t_factor."""
+    for path in ("/usr/lib/x86_64-linux-gnu/libblas.so.3", "/usr/lib/aarch64-linux-gnu/libblas.so.3"):
+        if os.path.exists(path):
+            return os.path.realpath(path)
+    return "unknown"
+
+
 def report(by_ranks: dict) -> dict:
     """bench.json content: per rank count and size, plus 2-rank speedups."""
     ranks = sorted(by_ranks)
-    doc = {"runs": {str(k): by_ranks[k] for k in ranks}, "speedup": {}}
+    doc = {"blas": blas_library(), "runs": {str(k): by_ranks[k] for k in ranks}, "speedup": {}}
     if 1 in by_ranks:
         for k in ranks:
             if k == 1:
@@ -165,7 +173,8 @@ def report(by_ranks: dict) -> dict:
 
 
 def table(doc: dict) -> str:
-    lines = ["| ranks | size | dofs | steps | Newton it. (all) | wall [s] | setup [s] | per step [s] | t_factor [s] "
+    lines = [f"BLAS: {doc.get('blas', 'unknown')}", "",
+             "| ranks | size | dofs | steps | Newton it. (all) | wall [s] | setup [s] | per step [s] | t_factor [s] "
              "| R | R_performed | assembly | factor | solves | stability | eigen | output | other | RSS/rank [MB] "
              "| g_c [um] |",
              "|" + "---|" * 20]

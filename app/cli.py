@@ -50,7 +50,7 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("--values", required=True, help="comma-separated values")
     _study_options(sw)
     be = sub.add_parser("bench", help="time the default bilayer to onset at three mesh sizes")
-    be.add_argument("--sizes", default="coarse,default,fine", help="comma-separated: coarse, default, fine")
+    be.add_argument("--sizes", default="coarse,default,fine", help="comma-separated: coarse, default, fine, finer")
     be.add_argument("--ranks", help="comma-separated rank counts to launch under mpirun, e.g. 1,2")
     be.add_argument("-o", "--output", default="results/bench", help="directory for bench.json and the runs")
     be.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
