@@ -56,6 +56,7 @@ class NewtonSolver:
                         else self._iterative_options(ksp_rtol, ksp_max_it))
         for key, value in settings.items():
             opts[self.prefix + key] = value
+        self._option_keys = [self.prefix + key for key in settings]
         self.factorization = factorization if linear == "direct" else None
         self.linear = linear
         self.last_iterations = 0
@@ -161,6 +162,11 @@ class NewtonSolver:
             reason = -100
         its = self.snes.getIterationNumber()
         self.last_iterations = its
+        if its >= 1:
+            # every option has been read once the linear solver was set up (MUMPS reads its controls at
+            # the first factorization, field-split its blocks' at the first PCSetUp): free PETSc's
+            # options table (512 entries per process), which many solvers in one process would fill
+            self._clear_options()
         self.linear_iterations += self.snes.getLinearSolveIterations()
         if reason > 0:
             self._sync_solution(self.x)
@@ -180,8 +186,16 @@ class NewtonSolver:
         nneg, nzero, npos = F.getInertia()
         return int(nneg), int(nzero), int(npos)
 
+    def _clear_options(self) -> None:
+        opts = PETSc.Options()
+        for key in self._option_keys:
+            if opts.hasName(key):
+                opts.delValue(key)
+        self._option_keys = []
+
     def destroy(self) -> None:
-        for obj in (self.snes, self.A, self.b, self.x):
+        self._clear_options()
+        for obj in (self.snes, self.A, self.b, self.x, self._g):
             obj.destroy()
 
 

@@ -132,6 +132,7 @@ class StabilityAnalyzer:
         eps.setFromOptions()
         eps.setTolerances(1e-10, 500)
         eps.solve()
+        PETSc.Options().delValue(prefix + "st_mat_mumps_icntl_13")
         pairs = []
         xr = Kf.createVecRight()
         for i in range(min(eps.getConverged(), n)):

@@ -27,3 +27,22 @@ def test_lu_factorization_falls_back_to_exact_stability_tests(shared_tmp, comm):
     s = simulate(cfg, shared_tmp / "lu", comm, progress=False)
     assert s["stability_tests"]["screened_steps"] == 0
     assert s["stability_tests"]["exact_tests"] >= s["steps"] + 1
+
+
+def test_solvers_leave_petsc_options_table_as_they_found_it(comm):
+    """PETSc keeps at most 512 options per process: a study or a test session creates hundreds of
+    solvers, so each must remove its own options once its linear solver is set up."""
+    from petsc4py import PETSc
+
+    from app.problem import Problem
+    from app.stepping import TimeStepper
+
+    cfg = small_bilayer(**{"time.end": 0.02})
+    p = Problem(cfg, comm)
+    before = len(PETSc.Options().getAll())
+    for linear in ("direct", "iterative") * 3:
+        cfg["solver"]["linear"] = linear
+        st = TimeStepper(p, cfg)
+        st.advance()
+        assert len(PETSc.Options().getAll()) == before
+        st.solver.destroy()
