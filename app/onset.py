@@ -1,7 +1,8 @@
 """Locating a stability crossing in time: bisection between a stable and an unstable state.
 
-On the first step whose negative-eigenvalue count exceeds the previous one, the crossing is
-bracketed by the last stable and the first unstable accepted states. The bracket is halved by
+Every accepted step gets a negative-eigenvalue count (:class:`CrossingDetector`: screened on the Newton
+factor, or exact). On the first step whose count exceeds the previous one, confirmed exactly, the
+crossing is bracketed by the last (exactly) stable and the first unstable accepted states. The bracket is halved by
 re-solving from the stable end to the midpoint (with the same error-controlled stepping) until its
 width is below ``stability.tolerance`` relative to the crossing time. At the two final ends SLEPc
 gives lambda_min; the critical time and growth are linear interpolations in lambda_min between
