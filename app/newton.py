@@ -87,7 +87,6 @@ class NewtonSolver:
         }
 
     @staticmethod
-    @staticmethod
     def _iterative_options(rtol: float, max_it: int) -> dict:
         """MINRES (K is symmetric, indefinite past an onset) with a block-diagonal (additive field-split)
         preconditioner, BoomerAMG on the displacement and on the flux block: symmetric positive

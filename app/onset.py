@@ -1,12 +1,12 @@
 """Locating a stability crossing in time: bisection between a stable and an unstable state.
 
-Every accepted step gets a negative-eigenvalue count (:class:`CrossingDetector`: screened on the Newton
-factor, or exact). On the first step whose count exceeds the previous one, confirmed exactly, the
-crossing is bracketed by the last (exactly) stable and the first unstable accepted states. The bracket is halved by
-re-solving from the stable end to the midpoint (with the same error-controlled stepping) until its
-width is below ``stability.tolerance`` relative to the crossing time. At the two final ends SLEPc
-gives lambda_min; the critical time and growth are linear interpolations in lambda_min between
-them, and the eigenvector of the crossing eigenvalue at the unstable end is the buckling mode.
+Every accepted step gets a negative-eigenvalue count (:class:`CrossingDetector`: screened on the
+Newton factor, or exact). On the first step whose count exceeds the previous one, confirmed exactly,
+the crossing is bracketed by the last (exactly) stable and the first unstable accepted states. The
+bracket is halved by re-solving from the stable end to the midpoint (with the same error-controlled
+stepping) until its width is below ``stability.tolerance`` relative to the crossing time. At the two
+final ends SLEPc gives lambda_min; the critical time and growth are linear interpolations in
+lambda_min between them, and the eigenvector of the crossing eigenvalue at the unstable end is the buckling mode.
 """
 
 from __future__ import annotations
