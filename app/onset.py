@@ -76,6 +76,7 @@ class CrossingDetector:
         self.screened_steps = 0
         self._last_exact = True
         self.false_alarms = 0
+        self.late_screens = 0  # states the walk-back found already unstable (the screen reported late)
         self.log = log or (lambda msg: None)
 
     def _exact(self) -> int:
@@ -123,6 +124,7 @@ class CrossingDetector:
             if self._exact() <= count:
                 lo = snap
                 break
+            self.late_screens += 1
             self.log(f"  the state at t = {snap.t:.6f} s is already unstable: widening the bracket")
         if lo is None:
             lo = self.verified

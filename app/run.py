@@ -123,7 +123,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         "failed_solves": stepper.failed_solves,
         "linear_solver": {"kind": cfg["solver"]["linear"], "krylov_iterations": stepper.solver.linear_iterations},
         **({"stability_tests": {"screening": scfg["screening"], "screened_steps": detector.screened_steps,
-                                "exact_tests": analyzer.tests, "false_alarms": detector.false_alarms}}
+                                "exact_tests": analyzer.tests, "false_alarms": detector.false_alarms,
+                                "late_screens": detector.late_screens}}
            if detector is not None else {}),
         "wall_time_s": time.perf_counter() - wall0,
         "versions": versions(),

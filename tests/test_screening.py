@@ -28,6 +28,23 @@ def test_screened_onset_equals_exact_onset(shared_tmp, comm):
     assert screened["stability_tests"]["exact_tests"] <= exact["stability_tests"]["exact_tests"] - steps + 4
 
 
+@pytest.mark.parametrize("tau, counter", [(10.0, "late_screens"), (1e-5, "false_alarms")])
+def test_screen_late_or_early_still_gives_the_exact_onset(shared_tmp, comm, tau, counter):
+    """A homogeneous gel (Biot-type surface instability) whose exact test uses a stability.tau far from
+    the steps' own: with tau = 10 s the exact K is softer and crosses before the screen (the bracket is
+    widened back to an exactly stable state), with 1e-5 s after it (false alarms). Either way g_c is
+    the exact-test g_c within the onset tolerance."""
+    base = ("material.film.modulus_ratio=1.0", "time.end=3", f"stability.tau={tau}")
+    runs = {mode: simulate(swelling_case(*base, f"stability.screening={mode}"), shared_tmp / mode, comm)
+            for mode in ("exact", "newton")}
+    exact, screened = runs["exact"], runs["newton"]
+    assert exact["status"] == screened["status"] == "buckled"
+    assert screened["stability_tests"][counter] >= 1  # the case exercises the mechanism it is named for
+    tol = exact["config"]["stability"]["tolerance"]
+    assert screened["critical"]["growth_mm"] == pytest.approx(exact["critical"]["growth_mm"], rel=tol)
+    assert screened["critical"]["time"] == pytest.approx(exact["critical"]["time"], rel=tol)
+
+
 # --- the bracket logic against a scripted history --------------------------------------------
 
 
