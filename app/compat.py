@@ -168,6 +168,12 @@ def owned_bc_dofs(bcs, W) -> np.ndarray:
     return np.unique(idx[idx < n_owned]).astype(np.int32)
 
 
+def owned_index_set(W, local_indices: np.ndarray, comm) -> PETSc.IS:
+    """PETSc index set of the global numbers of the given owned local indices of W."""
+    start = W.dofmap.index_map.local_range[0] * W.dofmap.index_map_bs
+    return PETSc.IS().createGeneral((start + np.sort(local_indices)).astype(PETSc.IntType), comm=comm)
+
+
 def set_dirichlet_values(x, bcs) -> None:
     """x[constrained dofs] = their prescribed values (owned entries)."""
     fem_petsc.set_bc(x, bcs)

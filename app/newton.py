@@ -11,6 +11,7 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from app import compat, timing
@@ -111,12 +112,7 @@ class NewtonSolver:
         """Global indices of the owned displacement and flux dofs of the mixed space."""
         p = self.problem
         n_owned = compat.owned_size(p.W)
-        start = p.W.dofmap.index_map.local_range[0] * p.W.dofmap.index_map_bs
-        sets = []
-        for dofs in (p.u_dofs, p.q_dofs):
-            owned = np.sort(dofs[dofs < n_owned]) + start
-            sets.append(PETSc.IS().createGeneral(owned.astype(PETSc.IntType), comm=p.comm))
-        return sets
+        return [compat.owned_index_set(p.W, dofs[dofs < n_owned], p.comm) for dofs in (p.u_dofs, p.q_dofs)]
 
     def _sync_solution(self, x: PETSc.Vec) -> None:
         w = self.problem.w
@@ -140,7 +136,7 @@ class NewtonSolver:
         local = float(np.max(np.abs(x.array[idx] - g.array[idx]))) if idx.size else 0.0
         scale = float(np.max(np.abs(g.array[idx]))) if idx.size else 0.0
         comm = self.problem.comm
-        return comm.allreduce(local, op=_mpi_max()) > 1e-13 * max(1.0, comm.allreduce(scale, op=_mpi_max()))
+        return comm.allreduce(local, op=MPI.MAX) > 1e-13 * max(1.0, comm.allreduce(scale, op=MPI.MAX))
 
     def _jacobian(self, snes, x, J, P):
         with timing.timed("assembly"):
@@ -196,9 +192,3 @@ class NewtonSolver:
         self._clear_options()
         for obj in (self.snes, self.A, self.b, self.x, self._g):
             obj.destroy()
-
-
-def _mpi_max():
-    from mpi4py import MPI
-
-    return MPI.MAX

@@ -48,16 +48,9 @@ class StabilityAnalyzer:
 
     def _free_index_set(self) -> PETSc.IS:
         W = self.p.W
-        imap = W.dofmap.index_map
-        bs = W.dofmap.index_map_bs
-        n_owned = imap.size_local * bs
-        fixed = np.zeros(n_owned, dtype=bool)
-        for bc in self.p.bcs:
-            idx = compat.bc_dof_indices(bc)
-            fixed[idx[idx < n_owned]] = True
-        start = imap.local_range[0] * bs
-        free = (start + np.flatnonzero(~fixed)).astype(PETSc.IntType)
-        return PETSc.IS().createGeneral(free, comm=self.p.comm)
+        fixed = np.zeros(compat.owned_size(W), dtype=bool)
+        fixed[compat.owned_bc_dofs(self.p.bcs, W)] = True
+        return compat.owned_index_set(W, np.flatnonzero(~fixed), self.p.comm)
 
     # --- K on the free dofs ----------------------------------------------------------------
 
