@@ -1,16 +1,30 @@
 # hydrobuckle on Debian 12 with the Debian FEniCSx stack (dolfinx 0.5.2, PETSc/SLEPc 3.18, gmsh 4.8).
 #   docker build -t hydrobuckle .
-#   docker run --rm -v "$PWD/results:/opt/hydrobuckle/results" hydrobuckle mpirun -n 2 hydrobuckle run configs/bilayer.toml
+#   mkdir -p results
+#   docker run --rm --user "$(id -u):$(id -g)" -v "$PWD/results:/opt/hydrobuckle/results" \
+#       hydrobuckle mpirun -n 2 hydrobuckle run configs/bilayer.toml
+# scripts/docker-check.sh builds the image (making the debian:bookworm base where it cannot be
+# pulled) and checks these commands.
 FROM debian:bookworm
 ENV DEBIAN_FRONTEND=noninteractive \
     OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 \
-    OMPI_MCA_rmaps_base_oversubscribe=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
+    OMPI_MCA_rmaps_base_oversubscribe=1 \
+    OMPI_MCA_btl_vader_single_copy_mechanism=none \
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
+    XDG_CACHE_HOME=/var/cache/hydrobuckle \
+    MPLCONFIGDIR=/var/cache/hydrobuckle/matplotlib
+# OMPI_MCA_btl_vader_single_copy_mechanism=none: the container's security profile blocks Open MPI's
+# shared-memory single copy (thousands of "Read -1, expected ..." lines without it).
+# XDG_CACHE_HOME, MPLCONFIGDIR: the form (JIT) and matplotlib caches, writable for any --user uid,
+# warmed while building.
 WORKDIR /opt/hydrobuckle
-# Install the system stack first (cached layer), then the project itself.
-COPY scripts/install.sh scripts/install.sh
-RUN HYDROBUCKLE_SYSTEM_ONLY=1 bash scripts/install.sh && rm -rf /var/lib/apt/lists/*
+# System stack: this layer depends only on the package list (and its installer), not on the code.
+COPY scripts/apt-packages.txt scripts/apt-install.sh scripts/
+RUN APT_CLEAN=1 bash scripts/apt-install.sh
 COPY . .
-RUN rm -rf .venv && bash scripts/install.sh
+RUN rm -rf .venv && mkdir -p "$XDG_CACHE_HOME" "$MPLCONFIGDIR" \
+    && bash scripts/install.sh \
+    && chmod -R a+rwX "$XDG_CACHE_HOME" && chmod 1777 "$XDG_CACHE_HOME"
 ENV PATH=/opt/hydrobuckle/.venv/bin:$PATH
 ENTRYPOINT ["/opt/hydrobuckle/scripts/docker-entrypoint.sh"]
 CMD ["--help"]

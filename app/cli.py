@@ -36,6 +36,7 @@ def _parser() -> argparse.ArgumentParser:
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     sub.add_parser("version", help="print hydrobuckle, dolfinx, PETSc, SLEPc and gmsh versions")
+    sub.add_parser("warmup", help="compile the built-in problems' forms now, so the first run starts at once")
     msh = sub.add_parser("mesh", help="build a config's geometry and write it as a gmsh .msh file")
     msh.add_argument("config")
     msh.add_argument("-o", "--output", required=True, help="the .msh file to write")
@@ -94,6 +95,17 @@ def cmd_version(args) -> int:
 
     for k, v in versions().items():
         print(f"{k} {v}")
+    return EXIT_OK
+
+
+def cmd_warmup(args) -> int:
+    from app.warmup import warmup
+
+    comm = _comm()
+    _setup_logging(comm, quiet=True)
+    seconds = warmup(comm, log=print if comm.rank == 0 else (lambda _msg: None))
+    if comm.rank == 0:
+        print(f"warmup: form cache ready in {seconds:.1f} s")
     return EXIT_OK
 
 
@@ -315,7 +327,7 @@ def _setup_logging(comm, quiet: bool) -> None:
 
 
 COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version, "converge": cmd_converge,
-            "mesh": cmd_mesh, "study": cmd_study, "sweep": cmd_sweep, "bench": cmd_bench}
+            "mesh": cmd_mesh, "study": cmd_study, "sweep": cmd_sweep, "bench": cmd_bench, "warmup": cmd_warmup}
 
 
 def main(argv: list[str] | None = None) -> int:
