@@ -42,7 +42,8 @@ if ! installed; then
   installed || { echo "install: error: hydrobuckle is not importable from $venv or $venv/bin/hydrobuckle" \
                       "is missing after 'pip install -e $here'" >&2; exit 1; }
 fi
-(cd / && "$venv/bin/hydrobuckle" version) | head -n 2 | sed 's/^/install: ok, /'
+versions=$(cd / && "$venv/bin/hydrobuckle" version)  # whole output: a pipe closed early kills it (SIGPIPE)
+echo "install: ok, $(echo "$versions" | paste -sd ' ')"
 
 # Compile the forms of the built-in geometries now (the JIT cache, ~/.cache/fenics or
 # $XDG_CACHE_HOME/fenics), so the first run does not pay for it. Quick when already cached.

@@ -61,3 +61,47 @@ def run_to_end(cfg: dict, comm):
         rows.append(st.advance())
     st.solver.destroy()
     return p, st, rows
+
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def child_env() -> dict:
+    """The environment for a child process that starts its own MPI job (mpirun or a singleton):
+    the parent's Open MPI/PMIx variables removed, so a test running under ``mpirun -n 2`` can
+    launch one too."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_", "PRTE_"))}
+    env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1",
+               OPENBLAS_NUM_THREADS="1", OMPI_MCA_rmaps_base_oversubscribe="1")
+    return env
+
+
+def on_rank0(fn, *args, **kwargs):
+    """Call ``fn`` on rank 0 only and return its result on every rank (its exception is re-raised
+    on every rank). The other ranks wait without spinning, so a child MPI job started by ``fn``
+    gets the cores."""
+    import time
+
+    comm = MPI.COMM_WORLD
+    if comm.size == 1:
+        return fn(*args, **kwargs)
+    if comm.rank == 0:
+        try:
+            payload = (True, fn(*args, **kwargs))
+        except BaseException as err:  # noqa: B036 - handed to the other ranks, then re-raised
+            payload = (False, err)
+        for r in range(1, comm.size):
+            comm.send(payload, dest=r, tag=77)
+    else:
+        req = comm.irecv(source=0, tag=77)
+        while True:
+            done, payload = req.test()
+            if done:
+                break
+            time.sleep(0.05)
+    ok, value = payload
+    if not ok:
+        raise value
+    return value
