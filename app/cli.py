@@ -260,6 +260,10 @@ def cmd_bench(args) -> int:
         bad = [x for x in sizes if x not in bench.SIZES]
         if bad or not sizes:
             raise config.ConfigError("--sizes", f"{','.join(bad) or '(none)'}; allowed: " + ", ".join(bench.SIZES))
+        twice = sorted({x for x in sizes if sizes.count(x) > 1})
+        if twice:  # one result per size: a repeated size would overwrite the other
+            raise config.ConfigError("--sizes", f"{','.join(twice)} given more than once; allowed: each of "
+                                     + ", ".join(bench.SIZES) + " at most once")
         ranks = None
         if args.ranks:
             try:

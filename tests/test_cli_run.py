@@ -107,6 +107,21 @@ def test_run_reports_gc_with_its_discretization_error(shared_tmp):
         s = json.loads((out / "error-estimate" / study / "summary.json").read_text())
         companions[study] = s["critical"]["growth_um"]
         assert est[f"{study}_companion_g_c_um"] == companions[study]
+    # the companions really are coarser: time tolerance x4 (about half the steps), element size x2 and
+    # half the film layers (about a quarter of the cells)
+    base_cfg = config.load(out / "config.toml")
+    tcfg = config.load(out / "error-estimate" / "time" / "config.toml")
+    mcfg = config.load(out / "error-estimate" / "mesh" / "config.toml")
+    assert tcfg["time"]["tolerance"] == 4 * base_cfg["time"]["tolerance"]
+    assert tcfg["mesh"] == base_cfg["mesh"]
+    assert mcfg["mesh"]["element_size"] == 2 * base_cfg["mesh"]["element_size"]
+    assert mcfg["mesh"]["film_layers"] * 2 == base_cfg["mesh"]["film_layers"]
+    assert mcfg["time"] == base_cfg["time"]
+    base = json.loads((out / "summary.json").read_text())
+    tsum = json.loads((out / "error-estimate" / "time" / "summary.json").read_text())
+    msum = json.loads((out / "error-estimate" / "mesh" / "summary.json").read_text())
+    assert tsum["mesh"]["cells"] == base["mesh"]["cells"] and tsum["steps"] < base["steps"]
+    assert 3.0 < base["mesh"]["cells"] / msum["mesh"]["cells"] < 5.0
     # time: order 1 -> |g - g_2dt|; mesh: order 1.5 -> |g - g_2h| / (2^1.5 - 1)
     assert est["time_um"] == abs(crit["growth_um"] - companions["time"])
     assert est["mesh_um"] == abs(crit["growth_um"] - companions["mesh"]) / (2 ** 1.5 - 1)

@@ -23,9 +23,11 @@ def test_distributed_history_equals_serial(kind):
     distributed = _history(cfg, world)
     serial = _history(cfg, MPI.COMM_SELF)  # every rank alone
     assert distributed.shape == serial.shape
-    scale = np.maximum(np.abs(serial), 1e-300)
-    rel = np.abs(distributed - serial) / scale
-    rel[np.abs(serial) < 1e-14] = 0.0
+    # relative to each value, and to its column's magnitude where the value itself is ~0 (growth and
+    # inflow at t = 0): a parallel value that is not ~0 there still fails
+    column = np.abs(serial).max(axis=0)
+    scale = np.maximum(np.abs(serial), 1e-9 * column)
+    rel = np.abs(distributed - serial) / np.where(scale > 0, scale, 1.0)
     assert rel.max() < 1e-6, rel.max()
 
 
@@ -39,6 +41,9 @@ def test_distributed_onset_equals_serial(shared_tmp):
     world = MPI.COMM_WORLD
     dist = simulate(cfg, shared_tmp / "dist", world)["critical"]
     serial = simulate(cfg, shared_tmp / f"serial{world.rank}", MPI.COMM_SELF)["critical"]
-    assert dist["growth_mm"] == pytest.approx(serial["growth_mm"], rel=1e-3)
-    assert dist["time"] == pytest.approx(serial["time"], rel=1e-3)
+    # the bisection takes the same branches on 1 and 2 ranks (the states agree to ~1e-9, see the
+    # history test), so the onset agrees far better than the bracket width stability.tolerance = 1e-3
+    assert dist["bracket"] == pytest.approx(serial["bracket"], rel=1e-9)
+    assert dist["growth_mm"] == pytest.approx(serial["growth_mm"], rel=1e-6)
+    assert dist["time"] == pytest.approx(serial["time"], rel=1e-9)
     assert dist["wrinkle_count"] == serial["wrinkle_count"]

@@ -27,10 +27,17 @@ def _history(outdir):
 
 
 def test_compression_wrinkling_matches_stiff_film_theory(shared_tmp, comm):
-    """Undrained compression of a stiff film (ratio 50) on a deep substrate: critical strain within
-    10% of eps_c = (1/4)(3 Es/Ef)^(2/3) and wrinkle count within 1 of L/l_c."""
+    """Undrained compression of a stiff film (ratio 50) on a deep substrate against plane-strain
+    film-on-substrate theory (docs/validation.md): eps_c = (1/4)(3 Es/Ef)^(2/3).
+
+    The strain is measured -1.9% off (finite substrate, nonlinear film, mesh); with the volumetric
+    penalty integrated at 2x2 Gauss points (volumetric locking) it was +5.4% at this mesh, so the bound
+    of 3% separates the two. The wrinkle count must be one that theory cannot tell from the optimum:
+    eps(N)/eps_c = (k/k_c)^2/3 + 2 k_c/(3 k) with k = 2 pi N / L within 1% of 1 (9.5..11 here; the
+    model's own strain error of ~2% cannot pick among them)."""
+    L = 1.5
     cfg = config.resolve({
-        "geometry": {"length": 1.5, "substrate_thickness": 0.5, "film_thickness": 0.01},
+        "geometry": {"length": L, "substrate_thickness": 0.5, "film_thickness": 0.01},
         "mesh": {"element_size": 0.0033, "film_layers": 3, "substrate_grading": 1.25},
         "material": {"film": {"modulus_ratio": 50.0}},
         "loading": {"kind": "compression", "compression_strain": 0.07},
@@ -44,8 +51,14 @@ def test_compression_wrinkling_matches_stiff_film_theory(shared_tmp, comm):
     eps_c = film_wrinkling_strain(mats["film"], mats["substrate"])
     l_c = film_wrinkling_wavelength(mats["film"], mats["substrate"], 0.01)
     crit = s["critical"]
-    assert crit["applied_strain"] == pytest.approx(eps_c, rel=0.10)  # measured -1.9%
-    assert abs(crit["wrinkle_count"] - 1.5 / l_c) <= 1.0  # measured 9.5 vs 10.25
+    assert crit["applied_strain"] == pytest.approx(eps_c, rel=0.03)  # measured -1.9%; locked: +5.4%
+
+    def strain_ratio(n):
+        k = n * l_c / L  # k / k_c
+        return k ** 2 / 3 + 2 / (3 * k)
+
+    band = [n / 2 for n in range(1, 200) if strain_ratio(n / 2) <= 1.01]
+    assert crit["wrinkle_count"] in band, (crit["wrinkle_count"], band)  # measured 9.5; band 9.5..11
 
 
 def test_inertia_and_lambda_min_agree_in_sign_on_every_step(shared_tmp, comm):
@@ -61,7 +74,10 @@ def test_inertia_and_lambda_min_agree_in_sign_on_every_step(shared_tmp, comm):
     # K is positive definite at the crossing's stable end and indefinite at its unstable end
     crit = s["critical"]
     assert crit["lambda_min_before"] > 0 > crit["lambda_min_after"]
-    assert crit["bracket"][0] <= crit["time"] <= crit["bracket"][1]
+    lo, hi = crit["bracket"]
+    assert lo <= crit["time"] <= hi and hi - lo <= cfg["stability"]["tolerance"] * hi
+    # the located crossing agrees with the per-step inertia: stable on every step up to the bracket
+    assert all(int(r["negative_eigenvalues"]) == 0 for r in rows if float(r["time"]) <= lo)
 
 
 def test_bisection_tolerance_halving_moves_gc_less_than_tolerance(shared_tmp, comm):
@@ -92,6 +108,10 @@ def test_summary_reports_modes_and_writes_mode_files(shared_tmp, comm):
     assert crit["growth_um"] == pytest.approx(1e3 * crit["growth_mm"])
     assert len(crit["modes"]) == 3
     values = [m["eigenvalue"] for m in crit["modes"]]
-    assert values == sorted(values) and values[0] < 0
+    assert values == sorted(values)
+    # SLEPc's spectrum at the unstable end against the LDL^T inertia there (Sylvester's law): exactly
+    # one eigenvalue below zero, and it is the lambda_min the onset was interpolated from
+    assert sum(v < 0 for v in values) == crit["negative_eigenvalues"] == 1
+    assert values[0] == crit["lambda_min_after"]
     assert (out / "mode.xdmf").exists() and (out / "mode.png").stat().st_size > 0
     assert json.loads((out / "summary.json").read_text())["status"] == "buckled"
