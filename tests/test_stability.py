@@ -114,4 +114,9 @@ def test_summary_reports_modes_and_writes_mode_files(shared_tmp, comm):
     assert sum(v < 0 for v in values) == crit["negative_eigenvalues"] == 1
     assert values[0] == crit["lambda_min_after"]
     assert (out / "mode.xdmf").exists() and (out / "mode.png").stat().st_size > 0
+    # stop_at_onset (default): the run ends on the step that revealed the onset, with one crossing
+    assert cfg["stability"]["stop_at_onset"] and "crossings" not in s
+    negative = [int(r["negative_eigenvalues"]) > 0 for r in _history(out)]
+    assert negative[-1] and not any(negative[:-1])
+    assert s["final"]["time"] >= crit["bracket"][1]
     assert json.loads((out / "summary.json").read_text())["status"] == "buckled"
