@@ -11,6 +11,8 @@ scan tolerates end effects and noise that shift or blur a discrete spectrum.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from app import compat
@@ -60,10 +62,13 @@ def band_vertex(counts, eigenvalues, step: float = 0.5) -> float | None:
 
     Near a wrinkling onset the eigenvalues of neighbouring wrinkle counts are nearly equal, so which
     of them crosses zero first is decided by tiny details. Around the count n0 with the lowest
-    eigenvalue, a parabola through the lowest eigenvalue of each count within n0 +- 2 steps (at
-    least one on each side) locates the minimum; its vertex, kept within half a step of n0 and
-    rounded to ``step``, is the count of the first crossing for a continuous spectrum. Far-away
-    counts (global modes, the other branch of the dispersion curve) are left out of the fit.
+    eigenvalue (equal lowest eigenvalues: the smaller count), a parabola through the lowest
+    eigenvalue of each count within n0 +- 2 steps (at least one on each side) locates the minimum of
+    lambda(N). The result is the count (a multiple of ``step``) nearest to the parabola's vertex,
+    with the vertex kept within one step of n0, so the answer is n0 or one of its neighbours. A
+    vertex halfway between two counts (to 1e-9 of a step, e.g. data mirrored about that point)
+    goes to the one nearer n0, i.e. to n0 itself, whatever the parity of n0 / step. Far-away counts
+    (global modes, the other branch of the dispersion curve) are left out of the fit.
     None if no such fit exists."""
     lowest: dict[float, float] = {}
     for n, lam in zip(counts, eigenvalues):
@@ -72,15 +77,16 @@ def band_vertex(counts, eigenvalues, step: float = 0.5) -> float | None:
         lowest[n] = min(lam, lowest.get(n, np.inf))
     if not lowest:
         return None
-    n0 = min(lowest, key=lowest.get)
+    n0 = min(lowest, key=lambda n: (lowest[n], n))
     near = sorted(n for n in lowest if abs(n - n0) <= 2 * step + 1e-9)
     if len(near) < 3 or min(near) >= n0 or max(near) <= n0:
         return None
     a, b, _ = np.polyfit(near, [lowest[n] for n in near], 2)
     if a <= 0:
         return None
-    vertex = min(max(-b / (2 * a), n0 - step / 2), n0 + step / 2)
-    return step * round(vertex / step)
+    offset = min(max(-b / (2 * a) - n0, -step), step) / step  # vertex - n0 in steps, in [-1, 1]
+    k = math.floor(abs(offset) + 0.5 - 1e-9)  # nearest whole step; a tie rounds towards n0
+    return n0 + math.copysign(k * step, offset)
 
 
 def circumferential_wavenumber(theta: np.ndarray, r: np.ndarray, weights: np.ndarray | None = None) -> int:
