@@ -59,7 +59,8 @@ def test_chemical_potential_matches_derivative_away_from_reference():
 
 
 def test_constrained_layer_reference_value():
-    """NOTES section 4: l = 4.887 at mu_bar = 0 for gamma = 0.1; zero traction and mu = mu_bar there."""
+    """l = 4.887 at mu_bar = 0 for gamma = 0.1 (docs/validation.md, section 1: closed form of eqs. 3.3-3.4
+    with F = diag(1, l)); zero traction and mu = mu_bar there."""
     mat = Hydrogel(shear_modulus=0.1, **PAPER)
     lam = constrained_layer_stretch(mat, 0.0)
     assert lam == pytest.approx(4.887, abs=5e-4)

@@ -33,7 +33,7 @@ def test_distributed_history_equals_serial(kind):
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run with a serial one")
 def test_distributed_onset_equals_serial(shared_tmp):
-    from test_stability import swelling_case
+    from cases import swelling_case
 
     from app.run import simulate
 

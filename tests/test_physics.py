@@ -29,7 +29,8 @@ def test_fluid_volume_balance_during_swelling(comm):
 
 
 def test_steady_state_of_constrained_layer_matches_analytic_stretch(comm):
-    """NOTES section 4: homogeneous layer, u_x = 0, traction-free top, mu = 0 -> stretch 4.887."""
+    """Homogeneous layer, u_x = 0, traction-free top, mu = 0 -> stretch 4.887, the closed form of eqs.
+    3.3-3.4 with F = diag(1, l): P_yy = 0 and mu = mu_bar (docs/validation.md, section 1)."""
     cfg = config.resolve({
         "geometry": {"length": 0.02, "substrate_thickness": 0.02, "film_thickness": 0.005},
         "mesh": {"element_size": 0.01, "film_layers": 2, "substrate_grading": 1.0},

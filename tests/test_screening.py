@@ -4,10 +4,10 @@ bracket logic when the screen is late or early (against a scripted eigenvalue hi
 from dataclasses import dataclass
 
 import pytest
+from cases import swelling_case
 
 from app.onset import CrossingDetector
 from app.run import simulate
-from tests.test_stability import swelling_case
 
 
 def test_screened_onset_equals_exact_onset(shared_tmp, comm):

@@ -4,22 +4,11 @@ import csv
 import json
 
 import pytest
+from cases import swelling_case
 
 from app import config
 from app.run import simulate
 from app.theory import film_wrinkling_strain, film_wrinkling_wavelength
-
-SWELLING = {
-    "geometry": {"length": 0.3, "substrate_thickness": 0.15, "film_thickness": 0.01},
-    "mesh": {"element_size": 0.005, "film_layers": 2, "substrate_grading": 1.25},
-    "time": {"end": 1.0, "dt_initial": 0.001, "dt_max": 0.05},
-    "output": {"fields": False, "plot": False},
-}
-
-
-def swelling_case(*overrides) -> dict:
-    return config.resolve(SWELLING, list(overrides))
-
 
 def _history(outdir):
     with open(outdir / "history.csv") as f:

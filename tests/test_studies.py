@@ -5,9 +5,8 @@ import csv
 import json
 
 import pytest
+from cases import SMALL_TUBE, SWELLING
 from mpi4py import MPI
-from test_stability import SWELLING
-from test_tubes import SMALL_TUBE
 
 from app import cli, studies
 

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 import ufl
+from cases import SWELLING, tube_case
 
 from app import compat, config
 from app.problem import Problem
@@ -13,19 +14,6 @@ from app.run import simulate
 from app.stepping import TimeStepper
 from app.wrinkles import boundary_displacement
 from meshes import bilayer, tube
-
-SMALL_TUBE = {
-    "geometry": {"kind": "tube", "outer_radius": 0.3, "substrate_thickness": 0.06, "film_thickness": 0.01},
-    "mesh": {"element_size": 0.01, "film_layers": 2, "substrate_grading": 1.3},
-    "material": {"film": {"modulus_ratio": 10.0}},
-    "time": {"end": 1.0, "dt_initial": 0.001, "dt_max": 0.05},
-    "output": {"fields": False, "plot": False},
-}
-
-
-def tube_case(*overrides, kind="tube"):
-    user = {**SMALL_TUBE, "geometry": {**SMALL_TUBE["geometry"], "kind": kind}}
-    return config.resolve(user, list(overrides))
 
 
 def _areas(tm, comm):
@@ -94,8 +82,6 @@ def test_elliptic_tube_with_aspect_ratio_one_is_the_circular_tube(shared_tmp, co
 
 
 def test_bilayer_msh_round_trip_gives_the_same_onset(shared_tmp, comm):
-    from test_stability import SWELLING
-
     cfg = config.resolve(SWELLING)
     msh_path = shared_tmp / "bilayer.msh"
     g, m = cfg["geometry"], cfg["mesh"]

@@ -1,0 +1,32 @@
+"""Small configs shared by several test modules (test modules never import each other)."""
+
+from __future__ import annotations
+
+from app import config
+
+# A 0.3 mm wide bilayer strip that buckles within a second of swelling.
+SWELLING = {
+    "geometry": {"length": 0.3, "substrate_thickness": 0.15, "film_thickness": 0.01},
+    "mesh": {"element_size": 0.005, "film_layers": 2, "substrate_grading": 1.25},
+    "time": {"end": 1.0, "dt_initial": 0.001, "dt_max": 0.05},
+    "output": {"fields": False, "plot": False},
+}
+
+
+def swelling_case(*overrides) -> dict:
+    return config.resolve(SWELLING, list(overrides))
+
+
+# A small bilayered tube (R = 0.3 mm) that buckles within a second of swelling.
+SMALL_TUBE = {
+    "geometry": {"kind": "tube", "outer_radius": 0.3, "substrate_thickness": 0.06, "film_thickness": 0.01},
+    "mesh": {"element_size": 0.01, "film_layers": 2, "substrate_grading": 1.3},
+    "material": {"film": {"modulus_ratio": 10.0}},
+    "time": {"end": 1.0, "dt_initial": 0.001, "dt_max": 0.05},
+    "output": {"fields": False, "plot": False},
+}
+
+
+def tube_case(*overrides, kind="tube"):
+    user = {**SMALL_TUBE, "geometry": {**SMALL_TUBE["geometry"], "kind": kind}}
+    return config.resolve(user, list(overrides))
