@@ -453,11 +453,11 @@ def dumps(cfg: dict) -> str:
 
     def table(d: dict, prefix: str) -> None:
         scalars = {k: v for k, v in d.items() if not isinstance(v, dict) and v is not None}
-        if prefix and scalars:
+        if prefix and (scalars or not d):  # an empty table (e.g. a material with no own keys) is kept
             lines.append(f"[{prefix}]")
         for k, v in scalars.items():
             lines.append(f"{k} = {_toml_value(v)}")
-        if scalars:
+        if scalars or (prefix and not d):
             lines.append("")
         for k, v in d.items():
             if isinstance(v, dict):
