@@ -133,6 +133,7 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
                           "error_estimate_um": err, "relative_error": err / abs(g + corr) if g + corr else None}
     if comm.rank == 0:
         _write(outdir, rows, report)
+    comm.barrier()  # every rank may read convergence.json once this returns
     b = report["base"]
     if b:
         log.info(f"converge: base g_c = {b['g_c_um']:.4f} um, converged estimate {b['converged_estimate_um']:.4f} um, "
