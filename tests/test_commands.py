@@ -211,6 +211,20 @@ def test_converge_time_two_levels_end_to_end(shared_tmp, comm):
     assert (out / "convergence.md").is_file() and (out / "convergence.png").stat().st_size > 0
 
 
+def test_converge_fixed_steps_halve_the_step_the_runs_take(shared_tmp, comm):
+    """With time.adaptive = false the time study halves the fixed step: every step of each level's
+    history (the onset, about 0.9 s, comes before the end of the ramp) has exactly that size."""
+    cfg_path, out = _write(shared_tmp / "tiny.toml", TINY), shared_tmp / "conv"
+    assert cli.main(["converge", str(cfg_path), "--only", "time", "--levels", "2", "-o", str(out), "-q",
+                     *_sets(["time.adaptive=false", "time.dt_initial=0.04", "time.dt_max=0.04"])]) == 0
+    doc = _json(out / "convergence.json")
+    for level, d in enumerate(("base", "time1")):
+        dts = {round(float(r["dt"]), 15) for r in _csv(out / d / "history.csv")[1:]}
+        assert dts == {0.04 / 2 ** level}
+        assert doc["rows"][level]["parameter"] == 0.04 / 2 ** level
+        assert _json(out / d / "summary.json")["critical"]["time"] < 1.0
+
+
 def test_converge_coarsened_mesh_end_to_end(shared_tmp, comm):
     """--coarsen: level 1 has twice the element size and half the film layers; the base (the finest)
     gets the extrapolated error."""
