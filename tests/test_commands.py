@@ -616,7 +616,8 @@ def _split_substrate(src, dst, y_cut):
         groups = []
         for dim, ptag in gmsh.model.getPhysicalGroups():
             name = gmsh.model.getPhysicalName(dim, ptag)
-            nodes = [gmsh.model.mesh.getElements(dim, e)[2][0] for e in gmsh.model.getEntitiesForPhysicalGroup(dim, ptag)]
+            entities = gmsh.model.getEntitiesForPhysicalGroup(dim, ptag)
+            nodes = [gmsh.model.mesh.getElements(dim, e)[2][0] for e in entities]
             groups.append((dim, name, np.concatenate(nodes)))
         gmsh.model.add("split")
         holder = gmsh.model.addDiscreteEntity(2)
