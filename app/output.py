@@ -102,27 +102,13 @@ class ResultWriter:
     # --- fields ----------------------------------------------------------------------------
 
     def setup_fields(self, problem) -> None:
-        """Compile the post-processing expressions once: u (CG1), s, mu, J, flux H (DG0)."""
+        """Compile the post-processing expressions once (see :data:`FIELDS`)."""
+        from app.xdmf import FieldSeries
+
         domain = problem.domain
-        self._xdmf = compat.xdmf_writer(self.comm, str(self.outdir / "fields.xdmf"))
-        self._xdmf.write_mesh(domain)
-        Vu = compat.vector_space(domain, "Lagrange", 1)
-        V0 = compat.scalar_space(domain, "DG", 0)
-        V0v = compat.vector_space(domain, "DG", 0)
-        # After a step is accepted, problem.state holds (u, Q) and problem.w the step's (u, dQ).
-        u, Q = ufl.split(problem.state)
-        _, dQ = ufl.split(problem.w)
-        mat = problem.mat
-        F = ufl.Identity(2) + ufl.grad(u)
-        s = mat.s0 - ufl.div(Q)
+        self._xdmf = FieldSeries(self.comm, self.outdir / "fields.xdmf", domain, "fields")
         self._fields = []
-        for name, space, expr in (
-            ("displacement", Vu, u),
-            ("fluid_content", V0, s),
-            ("chemical_potential", V0, chemical_potential(mat, ufl.det(F), s)),
-            ("J", V0, ufl.det(F)),
-            ("flux", V0v, dQ / problem.tau),
-        ):
+        for name, space, expr in field_expressions(problem):
             f = compat.Function(space)
             f.name = name
             self._fields.append((f, compat.expression(expr, space)))
@@ -133,7 +119,7 @@ class ResultWriter:
         with timing.timed("output"):
             for f, expr in self._fields:
                 compat.interpolate(f, expr)
-                self._xdmf.write_function(f, t)
+            self._xdmf.write([f for f, _ in self._fields], t)
 
     # --- buckling mode ---------------------------------------------------------------------
 
@@ -150,10 +136,10 @@ class ResultWriter:
         base = compat.Function(Vu)
         base.name = "critical_displacement"
         base.x.array[:] = crossing.state[u_dofs]
-        with compat.xdmf_writer(self.comm, str(self.outdir / "mode.xdmf")) as f:
-            f.write_mesh(problem.domain)
-            f.write_function(mode, crossing.time)
-            f.write_function(base, crossing.time)
+        from app.xdmf import FieldSeries
+
+        with FieldSeries(self.comm, self.outdir / "mode.xdmf", problem.domain, "mode") as f:
+            f.write([base, mode], crossing.time)
         polys = _gather_cells(problem, base.x.array, mode.x.array)
         from app.wrinkles import along_profile, around_profile, boundary_displacement
 
@@ -181,12 +167,13 @@ class ResultWriter:
     def summary(self, data: dict) -> None:
         rewrite_summary(self.outdir, self.comm, data)
 
-    def plot_history(self) -> None:
+    def plot_history(self, critical: dict | None = None) -> None:
+        """history.png; ``critical`` (the summary's block) marks the onset (t_c, g_c)."""
         if not self.rank0 or not self.rows:
             return
         from app.plots import history_plot
 
-        history_plot(self.rows, self.outdir / "history.png")
+        history_plot(self.rows, self.outdir / "history.png", critical)
 
     def close(self) -> None:
         if self._xdmf is not None:
@@ -195,6 +182,46 @@ class ResultWriter:
         if self._csv is not None:
             self._csv.close()
             self._csv = None
+
+
+# name, meaning; every field of fields.xdmf, on one grid per output time
+FIELDS = (
+    ("displacement", "u [mm], nodal (CG1)"),
+    ("fluid_content", "s, fluid volume per reference volume, per cell"),
+    ("chemical_potential", "mu [MPa], per cell"),
+    ("J", "det F, per cell"),
+    ("flux", "H [mm/s] at the cell centre (the RTCF flux of the last step)"),
+    ("stress_xx", "Cauchy stress sigma_xx [MPa], per cell"),
+    ("stress_yy", "Cauchy stress sigma_yy [MPa], per cell"),
+    ("stress_xy", "Cauchy stress sigma_xy [MPa], per cell"),
+    ("stress_min_principal", "smaller in-plane principal Cauchy stress [MPa] (the film's compression), per cell"),
+)
+
+
+def field_expressions(problem):
+    """(name, space, UFL expression) of every field in :data:`FIELDS`, from the converged state.
+
+    After a step is accepted, problem.state holds (u, Q) and problem.w the step's (u, dQ). The stress
+    is the Cauchy stress sigma = P F^T / det F with P = dpsi/dF by UFL differentiation."""
+    from app.material import free_energy
+
+    domain = problem.domain
+    Vu = compat.vector_space(domain, "Lagrange", 1)
+    V0 = compat.scalar_space(domain, "DG", 0)
+    V0v = compat.vector_space(domain, "DG", 0)
+    u, Q = ufl.split(problem.state)
+    _, dQ = ufl.split(problem.w)
+    mat = problem.mat
+    F = ufl.variable(ufl.Identity(2) + ufl.grad(u))
+    s = mat.s0 - ufl.div(Q)
+    J = ufl.det(F)
+    sigma = ufl.diff(free_energy(mat, F, s), F) * F.T / J
+    mean = 0.5 * (sigma[0, 0] + sigma[1, 1])
+    radius = ufl.sqrt((0.5 * (sigma[0, 0] - sigma[1, 1])) ** 2 + sigma[0, 1] ** 2)
+    exprs = {"displacement": (Vu, u), "fluid_content": (V0, s), "chemical_potential": (V0, chemical_potential(mat, J, s)),
+             "J": (V0, J), "flux": (V0v, dQ / problem.tau), "stress_xx": (V0, sigma[0, 0]),
+             "stress_yy": (V0, sigma[1, 1]), "stress_xy": (V0, sigma[0, 1]), "stress_min_principal": (V0, mean - radius)}
+    return [(name, *exprs[name]) for name, _ in FIELDS]
 
 
 def _max():

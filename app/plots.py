@@ -8,13 +8,21 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 
-def history_plot(rows: list[dict], path) -> None:
-    """Growth and surface chemical potential against time (two stacked panels)."""
+def history_plot(rows: list[dict], path, critical: dict | None = None) -> None:
+    """Growth and surface chemical potential against time (two stacked panels); ``critical`` (the
+    summary's block) marks the onset: t_c on both panels, (t_c, g_c) on the growth curve."""
     t = [r["time"] for r in rows]
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(6.4, 5.6))
     ax1.plot(t, [1e3 * r["growth_mm"] for r in rows], "-", color="C0")
     ax1.set_ylabel("growth [um]")
     ax1.grid(alpha=0.3)
+    if critical:
+        tc, gc = critical["time"], critical["growth_um"]
+        for ax in (ax1, ax2):
+            ax.axvline(tc, color="C3", lw=0.8, ls=":")
+        ax1.plot([tc], [gc], "o", color="C3", ms=6,
+                 label=f"onset: g_c = {gc:.3g} um at t_c = {tc:.4g} s, N_c = {critical['wrinkle_count']:g}")
+        ax1.legend(fontsize=8, loc="upper left")
     if any(r.get("applied_strain") for r in rows):
         ax1b = ax1.twinx()
         ax1b.plot(t, [r["applied_strain"] for r in rows], "--", color="C2")

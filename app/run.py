@@ -134,7 +134,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     writer.close()
     writer.summary(summary)
     if cfg["output"]["plot"]:
-        writer.plot_history()
+        writer.plot_history(summary.get("critical"))
     stepper.solver.destroy()
     if analyzer is not None:
         analyzer.destroy()

@@ -40,7 +40,7 @@ MUTATIONS = [
      ["tests/test_loading.py", "tests/test_physics.py"]),
     ("stop_at_onset ignored", "app/run.py",
      r'stop = scfg\["stop_at_onset"\] or ', "stop = ",
-     ["tests/test_stability.py"]),
+     ["tests/test_stability.py::test_summary_reports_modes_and_writes_mode_files"]),
     ("console script removed from pyproject.toml", "pyproject.toml",
      r'\nhydrobuckle = "app\.cli:main"\n', "\n",
      ["tests/test_console.py::test_install_into_fresh_venv_creates_console_script"]),
