@@ -81,11 +81,31 @@ def _input_error(comm, err: Exception) -> int:
     return EXIT_INPUT
 
 
+def _check_geometry(cfgs, comm, labels=None) -> None:
+    """Input errors only a geometry's file can show (a user .msh: missing, unreadable, groups the
+    config names but the file lacks), as ConfigError before any result directory exists."""
+    from app import geometry
+
+    seen = set()
+    for i, cfg in enumerate(cfgs):
+        geo = cfg["geometry"]
+        key = (geo["kind"], geo.get("file"), repr(geo.get("layers")), repr(geo.get("boundaries")))
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            geometry.check(cfg, comm)
+        except config.ConfigError as err:
+            if labels is None:
+                raise
+            raise config.ConfigError("", f"{err} (case {labels[i]})") from None
+
+
 def cmd_validate(args) -> int:
     try:
         cfg = config.load(args.config, args.set)
-    except config.ConfigError as err:
-        return _input_error(None, err)
+    except config.ConfigError as err:  # one line under mpirun too (the printed config: every rank)
+        return _input_error(_comm(), err)
     print(config.dumps(cfg))
     return EXIT_OK
 
@@ -113,6 +133,7 @@ def cmd_run(args) -> int:
     comm = _comm()
     try:
         cfg = config.load(args.config, args.set)
+        _check_geometry([cfg], comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
@@ -142,6 +163,7 @@ def cmd_converge(args) -> int:
             raise config.ConfigError("--levels", f"= {args.levels} is out of range; allowed: 2..6")
         if not cfg["stability"]["enabled"]:
             raise config.ConfigError("stability.enabled", "must be true for a convergence study of g_c")
+        _check_geometry([cfg], comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
@@ -194,7 +216,7 @@ def cmd_study(args) -> int:
         for name, spec in studies.STUDIES.items():
             values = ", ".join(f"{v:g}" for v in spec.values)
             print(f"{name:26s} {spec.description}\n{'':26s} {spec.param} = {values}")
-        return EXIT_OK if args.list else _input_error(None, config.ConfigError(
+        return EXIT_OK if args.list else _input_error(_comm(), config.ConfigError(
             "study", "needs a name; allowed: " + ", ".join(studies.STUDIES)))
     comm = _comm()
     if args.name not in studies.STUDIES:
@@ -205,6 +227,7 @@ def cmd_study(args) -> int:
         values = _parse_values(args.values) if args.values else None
         spec, cases = studies.study_cases(args.name, outdir, values, args.set, args.error_estimate, args.isomodes)
         _check_ranks(args, comm)
+        _check_geometry([c.cfg for c in cases], comm, [c.label for c in cases])
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
@@ -228,6 +251,7 @@ def cmd_sweep(args) -> int:
         cases = studies.build_cases(user, args.param, values, outdir, args.set, isomodes=bool(args.isomodes),
                                     error_estimate=args.error_estimate)
         _check_ranks(args, comm)
+        _check_geometry([c.cfg for c in cases], comm, [c.label for c in cases])
     except config.ConfigError as err:
         return _input_error(comm, err)
     except ValueError as err:
@@ -275,8 +299,7 @@ def cmd_bench(args) -> int:
             if comm.size > 1:
                 raise config.ConfigError("--ranks", "launches mpirun itself: run `hydrobuckle bench --ranks ...` "
                                          "without mpirun")
-        for name in sizes:
-            bench.size_config(name, args.set)
+        _check_geometry([bench.size_config(name, args.set) for name in sizes], comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)

@@ -76,21 +76,41 @@ def build(cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
             tm = msh.read(comm, geo["file"])
         except msh.MshError as err:
             raise config.ConfigError(err.key, str(err)) from None
-        for group in geo["layers"]:
-            if group not in tm.cell_names:
-                raise config.ConfigError(f"geometry.layers.{group}", "is not a cell physical group of "
-                                         f"{geo['file']}; its groups: " + ", ".join(sorted(tm.cell_names)))
-        for group in geo["boundaries"]:
-            if group not in tm.facet_names:
-                raise config.ConfigError(f"geometry.boundaries.{group}", "is not a facet physical group of "
-                                         f"{geo['file']}; its groups: " + ", ".join(sorted(tm.facet_names)))
-        missing = sorted(set(tm.cell_names) - set(geo["layers"]))
-        if missing:
-            raise config.ConfigError("geometry.layers", "gives no material to the cell group(s) "
-                                     + ", ".join(missing))
+        _check_msh_groups(geo, tm.cell_names, tm.facet_names)
         wrinkles = geo.get("wrinkles") or "auto"
         if wrinkles == "auto":
             wrinkles = "around" if msh.is_closed(tm, [g for g, r in geo["boundaries"].items()
                                                       if r == "permeable"]) else "along"
         return GeometrySetup(tm, dict(geo["layers"]), dict(geo["boundaries"]), wrinkles=wrinkles)
     raise config.ConfigError("geometry.kind", f"unsupported kind {kind!r}")
+
+
+def check(cfg: dict, comm) -> None:
+    """Raise ConfigError (on every rank) for input errors only the geometry's file can show, without
+    building a mesh: for geometry.kind = 'msh' the file must exist and be a readable quadrilateral
+    gmsh mesh with every cell group given a material and every named group present. Built-in kinds
+    are fully checked by ``config.validate``. Commands call this before they create any result."""
+    geo = cfg["geometry"]
+    if geo["kind"] != "msh":
+        return
+    from meshes import msh
+
+    try:
+        cells, facets = msh.physical_groups(comm, geo["file"])
+    except msh.MshError as err:
+        raise config.ConfigError(err.key, str(err)) from None
+    _check_msh_groups(geo, cells, facets)
+
+
+def _check_msh_groups(geo: dict, cells, facets) -> None:
+    for group in geo["layers"]:
+        if group not in cells:
+            raise config.ConfigError(f"geometry.layers.{group}", "is not a cell physical group of "
+                                     f"{geo['file']}; its groups: " + ", ".join(sorted(cells)))
+    for group in geo["boundaries"]:
+        if group not in facets:
+            raise config.ConfigError(f"geometry.boundaries.{group}", "is not a facet physical group of "
+                                     f"{geo['file']}; its groups: " + (", ".join(sorted(facets)) or "none"))
+    missing = sorted(set(cells) - set(geo["layers"]))
+    if missing:
+        raise config.ConfigError("geometry.layers", "gives no material to the cell group(s) " + ", ".join(missing))

@@ -25,30 +25,47 @@ class MshError(ValueError):
 
 
 def read(comm, path: str | Path, rank: int = 0) -> TaggedMesh:
+    """The mesh of a .msh file, distributed; MshError (key ``geometry.file``) on every rank if the
+    file is missing, unreadable, has no 2D physical groups or cells other than quadrilaterals."""
     path = Path(path)
-    problem = None
-    if comm.rank == rank and not path.is_file():
-        problem = f"= '{path}' does not exist"
-    problem = comm.bcast(problem, root=rank)
-    if problem:
-        raise MshError("geometry.file", problem)
     with gmsh_session(comm, "user-msh", rank) as active:
-        names = None
-        if active:
-            gmsh.merge(str(path))
-            names = _physical_names()
-            types = set(gmsh.model.mesh.getElementTypes(2))
-            if not names[0]:
-                names = ("no 2D physical groups (cell groups name the layers)",)
-            elif types - {QUAD}:
-                names = (f"contains non-quadrilateral cells (gmsh element types {sorted(types)}); "
-                         "hydrobuckle's RTCF flux needs quadrilaterals (recombine the mesh)",)
-        names = comm.bcast(names, root=rank)
-        if len(names) == 1:
-            raise MshError("geometry.file", f"= '{path}' {names[0]}")
-        cells, facets = names
+        cells, facets = _open(comm, path, rank, active)
         tm = to_dolfinx(comm, rank, cells, facets, {"file": str(path)})
     return tm
+
+
+def physical_groups(comm, path: str | Path, rank: int = 0) -> tuple[dict[str, int], dict[str, int]]:
+    """(cell groups, facet groups) of a .msh file as name -> tag on every rank, with the same checks
+    as :func:`read` but without building the mesh (for input checks before anything runs)."""
+    with gmsh_session(comm, "user-msh-groups", rank) as active:
+        return _open(comm, Path(path), rank, active)
+
+
+def _open(comm, path: Path, rank: int, active: bool):
+    """Merge the file into the gmsh session on ``rank``; its groups, or MshError on every rank."""
+    result = _merge(path) if active else None
+    result = comm.bcast(result, root=rank)
+    if isinstance(result, str):
+        raise MshError("geometry.file", f"= '{path}' {result}")
+    return result
+
+
+def _merge(path: Path):
+    """On the gmsh rank: the file's (cell groups, facet groups), or a sentence saying what is wrong."""
+    if not path.is_file():
+        return "does not exist"
+    try:
+        gmsh.merge(str(path))
+    except Exception as err:  # gmsh reports every parse error as a bare Exception
+        return "is not a readable gmsh mesh (" + " ".join(str(err).split()) + ")"
+    names = _physical_names()
+    types = set(gmsh.model.mesh.getElementTypes(2))
+    if not names[0]:
+        return "has no 2D physical groups (cell groups name the layers)"
+    if types - {QUAD}:
+        return (f"contains non-quadrilateral cells (gmsh element types {sorted(types)}); "
+                "hydrobuckle's RTCF flux needs quadrilaterals (recombine the mesh)")
+    return names
 
 
 def _physical_names():

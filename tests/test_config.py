@@ -2,12 +2,12 @@
 
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
+from conftest import child_env, on_rank0
 from mpi4py import MPI
 
-from app import cli, config
+from app import cli, config, geometry
 
 
 def test_defaults_are_the_documented_paper_case():
@@ -64,6 +64,16 @@ BAD = [
 ]
 
 
+def _one_line_on_rank0(err: str, *needles: str) -> None:
+    """Bad input: rank 0 prints exactly one line (containing ``needles``), every other rank nothing."""
+    lines = err.strip().splitlines()
+    if MPI.COMM_WORLD.rank == 0:
+        assert len(lines) == 1, err
+        assert all(n in lines[0] for n in needles), err
+    else:
+        assert lines == [], err
+
+
 @pytest.mark.parametrize("text,key,allowed", BAD)
 def test_bad_config_exits_2_with_one_line_and_no_result_dir(shared_tmp, capsys, text, key, allowed):
     comm = MPI.COMM_WORLD
@@ -75,36 +85,83 @@ def test_bad_config_exits_2_with_one_line_and_no_result_dir(shared_tmp, capsys, 
     code = cli.main(["run", str(cfg_path), "-o", str(out)])
     assert code == 2
     assert not out.exists()
-    err = capsys.readouterr().err.strip()
-    if comm.rank == 0:
-        assert len(err.splitlines()) == 1
-        assert f"'{key}'" in err and allowed in err
+    _one_line_on_rank0(capsys.readouterr().err, f"'{key}'", allowed)
 
 
 def test_bad_override_and_missing_file(shared_tmp, capsys):
     assert cli.main(["validate", str(shared_tmp / "nope.toml")]) == 2
-    assert "does not exist" in capsys.readouterr().err
+    _one_line_on_rank0(capsys.readouterr().err, "does not exist")
     good = shared_tmp / "good.toml"
     if MPI.COMM_WORLD.rank == 0:
         good.write_text("")
     MPI.COMM_WORLD.barrier()
     assert cli.main(["validate", str(good), "--set", "material.film.modulus_rati=3"]) == 2
-    assert "material.film.modulus_rati" in capsys.readouterr().err
+    _one_line_on_rank0(capsys.readouterr().err, "'material.film.modulus_rati'")
     assert cli.main(["validate", str(good), "--set", "mesh.film_layers=true"]) == 2
+    _one_line_on_rank0(capsys.readouterr().err, "'mesh.film_layers'")
 
 
-@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="spawns a fresh interpreter")
-def test_console_entry_point_exit_code(tmp_path):
-    cfg = tmp_path / "bad.toml"
-    cfg.write_text("[geometry]\nsubstrate_thickness = -1\n")
-    proc = subprocess.run([sys.executable, "-m", "app", "run", str(cfg), "-o", str(tmp_path / "r")],
-                          capture_output=True, text=True)
-    assert proc.returncode == 2
-    assert "geometry.substrate_thickness" in proc.stderr
-    assert not (tmp_path / "r").exists()
-    ver = subprocess.run([sys.executable, "-m", "app", "version"], capture_output=True, text=True)
-    assert ver.returncode == 0 and "dolfinx 0.5" in ver.stdout
-    assert Path(cfg).exists()
+MSH_LAYERS = '{ film = "film", substrate = "substrate" }'
+MSH_BOUNDARIES = '{ top = "permeable", left = "roller_x", right = "roller_x", bottom = "roller_y" }'
+# (file, layers, boundaries) -> the key named and what the message says
+BAD_MSH = [
+    ("nope.msh", MSH_LAYERS, MSH_BOUNDARIES, "geometry.file", "does not exist"),
+    ("garbage.msh", MSH_LAYERS, MSH_BOUNDARIES, "geometry.file", "is not a readable gmsh mesh"),
+    ("good.msh", '{ film = "film", coat = "substrate" }', MSH_BOUNDARIES, "geometry.layers.coat",
+     "is not a cell physical group"),
+    ("good.msh", MSH_LAYERS, MSH_BOUNDARIES.replace("top", "roof"), "geometry.boundaries.roof",
+     "is not a facet physical group"),
+    ("good.msh", '{ film = "film" }', MSH_BOUNDARIES, "geometry.layers", "gives no material to the cell group(s) "
+     "substrate"),
+]
+
+
+@pytest.mark.parametrize("file,layers,boundaries,key,message", BAD_MSH,
+                         ids=["missing", "unreadable", "cell-group", "facet-group", "unassigned-group"])
+def test_bad_msh_exits_2_with_one_line_and_no_result_dir(shared_tmp, capfd, file, layers, boundaries, key,
+                                                         message):
+    """A .msh that is missing, unreadable or lacks a group the config names is bad input for every
+    command that builds geometry: exit 2, one line naming the key on rank 0 (nothing on the others,
+    no traceback), no result directory; checked before anything runs."""
+    from meshes import bilayer
+
+    comm = MPI.COMM_WORLD
+    good = shared_tmp / "good.msh"
+    bilayer.build(comm, 0.1, 0.05, 0.01, 0.01, 2, 1.3, msh_path=str(good))
+    cfg_path = shared_tmp / "bad.toml"
+    if comm.rank == 0:
+        (shared_tmp / "garbage.msh").write_text("this is not a mesh\n")
+        cfg_path.write_text(f'[geometry]\nkind = "msh"\nfile = "{shared_tmp / file}"\nlayers = {layers}\n'
+                            f'boundaries = {boundaries}\n')
+    comm.barrier()
+    # the same config with the good file and the right groups passes the check
+    geometry.check(config.resolve({"geometry": {"kind": "msh", "file": str(good),
+                                                "layers": {"film": "film", "substrate": "substrate"},
+                                                "boundaries": {"top": "permeable", "bottom": "roller_y"}}}), comm)
+    capfd.readouterr()
+    out = shared_tmp / "results"
+    for command in (["run", str(cfg_path), "-o", str(out)],
+                    ["sweep", str(cfg_path), "--param", "material.film.modulus_ratio", "--values", "4,8", "-o",
+                     str(out)],
+                    ["converge", str(cfg_path), "--only", "time", "-o", str(out)]):
+        assert cli.main(command) == 2, command
+        assert not out.exists(), command
+        _one_line_on_rank0(capfd.readouterr().err, f"'{key}'", message)
+
+
+def test_python_m_app_entry_point_exit_code(shared_tmp):
+    """`python -m app` (app/__main__.py; the console script is tests/test_console.py's) passes main()'s
+    exit code on: bad input exits 2 with one line and no result directory. Started by rank 0 from /."""
+    cfg, out = shared_tmp / "bad.toml", shared_tmp / "r"
+    if MPI.COMM_WORLD.rank == 0:
+        cfg.write_text("[geometry]\nsubstrate_thickness = -1\n")
+    MPI.COMM_WORLD.barrier()
+    proc = on_rank0(subprocess.run, [sys.executable, "-m", "app", "run", str(cfg), "-o", str(out)], cwd="/",
+                    env=child_env(), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "'geometry.substrate_thickness'" in lines[0], proc.stderr
+    assert not out.exists()
 
 
 def test_msh_layers_and_boundaries_from_file_and_set():
