@@ -116,7 +116,7 @@ def strongly_elliptic(A):
 
 def surface_determinant(A):
     """Real zero-speed Rayleigh (Biot) function of a half-space X2 < 0, surface X2 = 0 traction-free, for the
-    orthotropic tangent A (general form, eq. (R) of derivation.md). Positive = surface-stable (checked at
+    orthotropic tangent A (general form, eq. (R) of drained-onset.md). Positive = surface-stable (checked at
     the unstrained state), zero = critical."""
     a = A["1212"] * A["2222"]
     c = A["1111"] * A["2121"]
