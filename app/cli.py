@@ -111,7 +111,7 @@ def cmd_validate(args) -> int:
 
 
 def cmd_version(args) -> int:
-    from app.output import versions
+    from app.io.output import versions
 
     for k, v in versions().items():
         print(f"{k} {v}")
@@ -119,7 +119,7 @@ def cmd_version(args) -> int:
 
 
 def cmd_warmup(args) -> int:
-    from app.warmup import warmup
+    from app.workflows.warmup import warmup
 
     comm = _comm()
     _setup_logging(comm, quiet=True)
@@ -138,13 +138,13 @@ def cmd_run(args) -> int:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
     outdir = Path(args.output) if args.output else Path("results") / Path(args.config).stem
-    from app.run import simulate
+    from app.workflows.run import simulate
 
     summary = simulate(cfg, outdir, comm)
     if summary["status"] == "buckled" and cfg["stability"]["error_estimate"]:
-        from app.convergence import companion_error_estimate
+        from app.workflows.convergence import companion_error_estimate
         from app.logging_setup import get
-        from app.output import rewrite_summary
+        from app.io.output import rewrite_summary
 
         est = companion_error_estimate(cfg, summary["critical"]["growth_um"], outdir, comm)
         summary["critical"]["discretization_error"] = est
@@ -168,11 +168,11 @@ def cmd_converge(args) -> int:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
     outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-converge")
-    from app.convergence import converge
+    from app.workflows.convergence import converge
 
     studies = (args.only,) if args.only else ("time", "mesh")
     try:
-        from app.convergence import refined_configs
+        from app.workflows.convergence import refined_configs
 
         for study in studies:
             refined_configs(cfg, study, args.levels, 4.0, 2.0, args.coarsen)
@@ -210,7 +210,7 @@ def _parse_values(text: str) -> list:
 
 
 def cmd_study(args) -> int:
-    from app import studies
+    from app.workflows import studies
 
     if args.list or not args.name:
         for name, spec in studies.STUDIES.items():
@@ -236,7 +236,7 @@ def cmd_study(args) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from app import studies
+    from app.workflows import studies
 
     comm = _comm()
     outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-sweep")
@@ -276,7 +276,7 @@ def _study_exit(rows, outdir, comm) -> int:
 
 
 def cmd_bench(args) -> int:
-    from app import bench
+    from app.workflows import bench
 
     comm = _comm()
     try:

@@ -13,7 +13,7 @@ import math
 import gmsh
 import numpy as np
 
-from meshes.tagged import TaggedMesh, add_physical, gmsh_session, to_dolfinx
+from app.geometry.tagged import TaggedMesh, add_physical, gmsh_session, to_dolfinx
 
 CELLS = {"film": 1, "substrate": 2}
 FACETS = {"bottom": 1, "top": 2, "left": 3, "right": 4}

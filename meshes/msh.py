@@ -13,7 +13,7 @@ import gmsh
 import numpy as np
 
 from app import compat
-from meshes.tagged import TaggedMesh, gmsh_session, to_dolfinx
+from app.geometry.tagged import TaggedMesh, gmsh_session, to_dolfinx
 
 QUAD = 3  # gmsh element type of 4-node quadrilaterals
 

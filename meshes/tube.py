@@ -21,7 +21,7 @@ import gmsh
 import numpy as np
 
 from meshes.bilayer import film_layer_heights, substrate_layer_heights
-from meshes.tagged import TaggedMesh, add_physical, gmsh_session, to_dolfinx
+from app.geometry.tagged import TaggedMesh, add_physical, gmsh_session, to_dolfinx
 
 CELLS = {"film": 1, "substrate": 2}
 FACETS = {"inner": 1, "outer": 2}

@@ -7,7 +7,7 @@ import csv
 import sys
 from pathlib import Path
 
-from app.studies import STUDIES
+from app.workflows.studies import STUDIES
 
 
 def _f(row: dict, key: str, fmt: str) -> str:

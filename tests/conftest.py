@@ -51,8 +51,8 @@ def small_bilayer(**overrides) -> dict:
 
 def run_to_end(cfg: dict, comm):
     """Integrate a config to time.end without the stability test: (problem, stepper, records)."""
-    from app.problem import Problem
-    from app.stepping import TimeStepper
+    from app.model.problem import Problem
+    from app.solvers.stepping import TimeStepper
 
     p = Problem(cfg, comm)
     st = TimeStepper(p, cfg)

@@ -35,7 +35,7 @@ def compute(name: str, outdir: Path, comm) -> dict:
     import csv
 
     from app import config
-    from app.run import simulate
+    from app.workflows.run import simulate
 
     root = Path(__file__).resolve().parents[1]
     path, overrides = CASES[name]

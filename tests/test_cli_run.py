@@ -6,7 +6,7 @@ import json
 from mpi4py import MPI
 
 from app import cli, config
-from app.stepping import StepRecord
+from app.solvers.stepping import StepRecord
 
 TINY = """
 [geometry]

@@ -23,10 +23,11 @@ import pytest
 from conftest import REPO, child_env, on_rank0, run_to_end
 from mpi4py import MPI
 
-from app import cli, compat, config, geometry, studies
-from app.convergence import refined_configs, richardson
-from app.material import chemical_potential_value
-from app.run import simulate
+from app import cli, compat, config, geometry
+from app.workflows import studies
+from app.workflows.convergence import refined_configs, richardson
+from app.model.material import chemical_potential_value
+from app.workflows.run import simulate
 
 # A bilayer that buckles in about 0.4 s (0.15 mm wide, 15 x 2 film elements).
 TINY = """
@@ -523,7 +524,7 @@ def test_bench_ranks_launches_its_own_mpirun(shared_tmp):
     """`hydrobuckle bench --ranks 1` starts `mpirun -n 1` itself (from rank 0 when the test runs under
     mpirun: the child gets an environment without the parent's MPI variables); its g_c is that of
     the same config run here on one rank."""
-    from app import bench
+    from app.workflows import bench
 
     out = shared_tmp / "bench"
     proc = on_rank0(_bench_one_rank, out)
@@ -680,7 +681,7 @@ def test_user_msh_with_a_third_material(shared_tmp, comm):
 
     cfg = config.resolve(_msh_user(shared_tmp, {"modulus_ratio": 3.0, "mobility": 2e-4}),
                          ["stability.enabled=false", "time.end=0.05"])
-    from app.problem import Problem
+    from app.model.problem import Problem
 
     p = Problem(cfg, comm)
     for group, value in (("film", 0.8), ("coating", 0.3), ("substrate", 0.1)):

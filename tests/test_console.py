@@ -37,7 +37,7 @@ def test_demo_script_runs_console_script_on_two_ranks(shared_tmp, comm):
         assert (out / name).stat().st_size > 0, name
 
     from app import config
-    from app.run import simulate
+    from app.workflows.run import simulate
 
     cfg = config.load(out / "config.toml")
     assert cfg == config.load(REPO / "configs" / "bilayer.toml", [s for s in SMALL if s != "--set"])

@@ -8,7 +8,7 @@ from conftest import small_bilayer
 from petsc4py import PETSc
 
 from app import compat
-from app.problem import Problem
+from app.model.problem import Problem
 
 
 def distorted_mesh(comm, n=6):

@@ -8,7 +8,7 @@ import ufl
 from mpi4py import MPI
 
 from app import compat
-from app.material import (
+from app.model.material import (
     Hydrogel,
     chemical_potential,
     constrained_layer_fluid,

@@ -17,10 +17,10 @@ import pytest
 from mpi4py import MPI
 
 from app import config
-from app.material import Hydrogel
-from app.output import RESULT_FILES, ResultWriter
-from app.run import simulate
-from app.theory import film_wrinkling_strain, film_wrinkling_wavelength, plane_strain_modulus
+from app.model.material import Hydrogel
+from app.io.output import RESULT_FILES, ResultWriter
+from app.workflows.run import simulate
+from app.model.theory import film_wrinkling_strain, film_wrinkling_wavelength, plane_strain_modulus
 
 SWELLING = {
     "geometry": {"length": 0.3, "substrate_thickness": 0.15, "film_thickness": 0.01},

@@ -5,7 +5,7 @@ import pytest
 from conftest import run_to_end, small_bilayer
 from mpi4py import MPI
 
-from app.stepping import StepRecord
+from app.solvers.stepping import StepRecord
 
 COLUMNS = [c for c in StepRecord.COLUMNS if c not in ("step", "newton_its", "error_estimate")]
 
@@ -35,7 +35,7 @@ def test_distributed_history_equals_serial(kind):
 def test_distributed_onset_equals_serial(shared_tmp):
     from cases import swelling_case
 
-    from app.run import simulate
+    from app.workflows.run import simulate
 
     cfg = swelling_case()
     world = MPI.COMM_WORLD

@@ -9,7 +9,7 @@ from mpi4py import MPI
 from scipy.optimize import brentq
 
 from app import config
-from app.material import Hydrogel, constrained_layer_stretch
+from app.model.material import Hydrogel, constrained_layer_stretch
 
 
 def _run(cfg, comm):
@@ -29,8 +29,8 @@ def test_fluid_taken_up_by_the_solid_equals_the_inflow_through_the_top(comm):
     import ufl
 
     from app import compat
-    from app.problem import Problem
-    from app.stepping import TimeStepper
+    from app.model.problem import Problem
+    from app.solvers.stepping import TimeStepper
 
     cfg = small_bilayer(**{"time.end": 1.2})
     p = Problem(cfg, comm)
@@ -74,7 +74,7 @@ def test_steady_state_of_constrained_layer_matches_analytic_stretch(comm):
     p, _, rows = _run(cfg, comm)
     lam = constrained_layer_stretch(p.materials["substrate"], 0.0)
     assert lam == pytest.approx(4.887, abs=1e-3)
-    from app.material import constrained_layer_fluid
+    from app.model.material import constrained_layer_fluid
 
     thickness, mat = 0.025, p.materials["substrate"]
     s_exact = constrained_layer_fluid(mat, lam)
@@ -132,7 +132,7 @@ def test_small_step_swelling_follows_terzaghi_consolidation(comm):
     linearized, the fluid content obeys ds/dt = c d2s/dy2 with c = J0^(1/3) M s0 dmu/ds (constrained),
     and the growth fraction and the fraction of the final fluid uptake that has entered follow
     U(T) = 1 - sum 2/k^2 exp(-k^2 T), T = c t / h^2 (a wrong mobility or dissipation term shifts c)."""
-    from app.material import chemical_potential_value, constrained_layer_fluid
+    from app.model.material import chemical_potential_value, constrained_layer_fluid
 
     h = 0.05
     cfg = config.resolve({

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 import pytest
 from cases import swelling_case
 
-from app.onset import CrossingDetector
-from app.run import simulate
+from app.onset.crossing import CrossingDetector
+from app.workflows.run import simulate
 
 
 def test_screened_onset_equals_exact_onset(shared_tmp, comm):

@@ -4,7 +4,7 @@ to exact tests where the Newton solver has no LDL^T factor."""
 import pytest
 from conftest import small_bilayer
 
-from app.run import simulate
+from app.workflows.run import simulate
 
 
 def test_iterative_newton_solves_match_direct(shared_tmp, comm):
@@ -34,8 +34,8 @@ def test_solvers_leave_petsc_options_table_as_they_found_it(comm):
     solvers, so each must remove its own options once its linear solver is set up."""
     from petsc4py import PETSc
 
-    from app.problem import Problem
-    from app.stepping import TimeStepper
+    from app.model.problem import Problem
+    from app.solvers.stepping import TimeStepper
 
     cfg = small_bilayer(**{"time.end": 0.02})
     p = Problem(cfg, comm)

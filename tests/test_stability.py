@@ -7,8 +7,8 @@ import pytest
 from cases import swelling_case
 
 from app import config
-from app.run import simulate
-from app.theory import film_wrinkling_strain, film_wrinkling_wavelength
+from app.workflows.run import simulate
+from app.model.theory import film_wrinkling_strain, film_wrinkling_wavelength
 
 def _history(outdir):
     with open(outdir / "history.csv") as f:
@@ -34,7 +34,7 @@ def test_compression_wrinkling_matches_stiff_film_theory(shared_tmp, comm):
         "output": {"fields": False, "plot": False}})
     s = simulate(cfg, shared_tmp / "comp", comm)
     assert s["status"] == "buckled"
-    from app.problem import layer_materials
+    from app.model.problem import layer_materials
 
     mats = layer_materials(cfg)
     eps_c = film_wrinkling_strain(mats["film"], mats["substrate"])

@@ -18,9 +18,9 @@ from conftest import run_to_end, small_bilayer
 from mpi4py import MPI
 
 from app import cli, compat, config
-from app.problem import Problem
-from app.run import simulate
-from app.stepping import CUTBACK, GROW_MAX, SAFETY, SHRINK_MIN
+from app.model.problem import Problem
+from app.workflows.run import simulate
+from app.solvers.stepping import CUTBACK, GROW_MAX, SAFETY, SHRINK_MIN
 
 
 def _write(path, text):

@@ -8,7 +8,8 @@ import pytest
 from cases import SMALL_TUBE, SWELLING
 from mpi4py import MPI
 
-from app import cli, studies
+from app import cli
+from app.workflows import studies
 
 
 def _sweep(outdir, comm, param, values, base=SWELLING, overrides=(), ranks_per_case=1, force=False):

@@ -11,10 +11,10 @@ from cases import SMALL_TUBE, SWELLING, tube_case
 from scipy.spatial import cKDTree
 
 from app import compat, config, geometry
-from app.problem import Problem
-from app.run import simulate
-from app.stepping import TimeStepper
-from app.wrinkles import boundary_displacement
+from app.model.problem import Problem
+from app.workflows.run import simulate
+from app.solvers.stepping import TimeStepper
+from app.onset.wrinkles import boundary_displacement
 from meshes import bilayer, msh, tube
 
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from conftest import small_bilayer
 
-from app.output import FIELDS
-from app.problem import Problem
-from app.run import simulate
+from app.io.output import FIELDS
+from app.model.problem import Problem
+from app.workflows.run import simulate
 
 h5py = pytest.importorskip("h5py")
 

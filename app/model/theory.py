@@ -18,7 +18,7 @@ import math
 
 from scipy.optimize import brentq
 
-from app.material import Hydrogel
+from app.model.material import Hydrogel
 
 BIOT_STRETCH = 0.5437
 

@@ -14,8 +14,8 @@ import ufl
 
 from app import compat, config, geometry
 from app.geometry import GeometrySetup
-from app.material import Hydrogel
-from app.potential import CompiledForms, MaterialFields, build
+from app.model.material import Hydrogel
+from app.model.potential import CompiledForms, MaterialFields, build
 
 
 @dataclass
@@ -200,7 +200,7 @@ class Problem:
         normal; for tubes the mean inward radial displacement of the passage's nodes (arc-length
         weighted); or the inward displacement of one point (elliptic passage: minor-axis vertex)."""
         if self.geo.growth == "mean_radial":
-            from app.wrinkles import around_profile, boundary_displacement
+            from app.onset.wrinkles import around_profile, boundary_displacement
 
             coords, disp = boundary_displacement(self, self.state.x.array, self.geo.facets_with_role("permeable"))
             _, radial, weights, _ = around_profile(coords, disp, centre=(0.0, 0.0))

@@ -56,7 +56,7 @@ def to_dolfinx(comm, rank: int, cell_names: dict, facet_names: dict, info: dict,
         gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
         gmsh.write(str(msh_path))
     mesh, ct, ft = compat.gmsh_model_to_mesh(gmsh.model, comm, rank, gdim=2)
-    from meshes.quality import min_scaled_jacobian
+    from app.geometry.quality import min_scaled_jacobian
 
     info = {**info, "min_scaled_jacobian": min_scaled_jacobian(mesh)}
     return TaggedMesh(mesh, ct, ft, dict(cell_names), dict(facet_names), info)

@@ -44,7 +44,7 @@ def size_config(name: str, overrides: list[str]) -> dict:
 
 
 def bench_one(cfg: dict, comm, outdir: Path) -> dict:
-    from app.run import simulate
+    from app.workflows.run import simulate
 
     timing.reset()
     t0 = time.perf_counter()

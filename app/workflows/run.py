@@ -6,11 +6,11 @@ import time
 from dataclasses import asdict
 
 from app import logging_setup, timing
-from app.onset import Crossing, CrossingDetector, locate_crossing
-from app.output import ResultWriter, versions
-from app.problem import Problem
-from app.stability import StabilityAnalyzer
-from app.stepping import StepFailure, StepRecord, TimeStepper
+from app.onset.crossing import Crossing, CrossingDetector, locate_crossing
+from app.io.output import ResultWriter, versions
+from app.model.problem import Problem
+from app.solvers.stability import StabilityAnalyzer
+from app.solvers.stepping import StepFailure, StepRecord, TimeStepper
 
 ASSUMPTIONS = (
     "material.shear_modulus (gamma_s) defaults to 0.1 MPa: the paper gives only ratios gamma_f/gamma_s",

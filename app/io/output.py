@@ -17,7 +17,7 @@ import numpy as np
 import ufl
 
 from app import compat, config, timing
-from app.material import chemical_potential
+from app.model.material import chemical_potential
 
 RESULT_FILES = ("summary.json", "history.csv", "config.toml", "fields.xdmf", "fields.h5", "history.png",
                 "mode.xdmf", "mode.h5", "mode.png", "mode_surface.csv")
@@ -103,7 +103,7 @@ class ResultWriter:
 
     def setup_fields(self, problem) -> None:
         """Compile the post-processing expressions once (see :data:`FIELDS`)."""
-        from app.xdmf import FieldSeries
+        from app.io.xdmf import FieldSeries
 
         domain = problem.domain
         self._xdmf = FieldSeries(self.comm, self.outdir / "fields.xdmf", domain, "fields")
@@ -136,12 +136,12 @@ class ResultWriter:
         base = compat.Function(Vu)
         base.name = "critical_displacement"
         base.x.array[:] = crossing.state[u_dofs]
-        from app.xdmf import FieldSeries
+        from app.io.xdmf import FieldSeries
 
         with FieldSeries(self.comm, self.outdir / "mode.xdmf", problem.domain, "mode") as f:
             f.write([base, mode], crossing.time)
         polys = _gather_cells(problem, base.x.array, mode.x.array)
-        from app.wrinkles import along_profile, around_profile, boundary_displacement
+        from app.onset.wrinkles import along_profile, around_profile, boundary_displacement
 
         groups = problem.geo.facets_with_role("permeable")
         coords, disp = boundary_displacement(problem, crossing.mode, groups)
@@ -158,7 +158,7 @@ class ResultWriter:
             profile = (t - t.min(), un / (np.abs(un).max() or 1.0), "position along the surface [mm]",
                        "normal mode displacement")
         if self.rank0 and self.cfg["output"]["plot"]:
-            from app.plots import mode_plot
+            from app.io.plots import mode_plot
 
             mode_plot(polys, profile, problem.geo, crossing, self.outdir / "mode.png")
 
@@ -171,7 +171,7 @@ class ResultWriter:
         """history.png; ``critical`` (the summary's block) marks the onset (t_c, g_c)."""
         if not self.rank0 or not self.rows:
             return
-        from app.plots import history_plot
+        from app.io.plots import history_plot
 
         history_plot(self.rows, self.outdir / "history.png", critical)
 
@@ -203,7 +203,7 @@ def field_expressions(problem):
 
     After a step is accepted, problem.state holds (u, Q) and problem.w the step's (u, dQ). The stress
     is the Cauchy stress sigma = P F^T / det F with P = dpsi/dF by UFL differentiation."""
-    from app.material import free_energy
+    from app.model.material import free_energy
 
     domain = problem.domain
     Vu = compat.vector_space(domain, "Lagrange", 1)

@@ -24,7 +24,7 @@ import ufl
 from mpi4py import MPI
 
 from app import compat
-from app.newton import NewtonSolver
+from app.solvers.newton import NewtonSolver
 
 CUTBACK = 0.25
 SAFETY = 0.9
@@ -70,7 +70,7 @@ class Snapshot:
 
 
 class TimeStepper:
-    """Advances a :class:`app.problem.Problem` in time."""
+    """Advances a :class:`app.model.problem.Problem` in time."""
 
     def __init__(self, problem, cfg: dict, log=None):
         self.p = problem

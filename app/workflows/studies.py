@@ -147,7 +147,7 @@ def is_complete(case: Case) -> bool:
 
 def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = False) -> None:
     """Run every case (skipping complete ones) on groups of ``ranks_per_case`` ranks."""
-    from app.run import simulate
+    from app.workflows.run import simulate
 
     log = logging_setup.get()
     k = max(1, min(ranks_per_case, comm.size))
@@ -168,8 +168,8 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
             try:
                 s = simulate(case.cfg, case.outdir, sub, progress=False)
                 if case.cfg["stability"]["error_estimate"] and s["status"] == "buckled":
-                    from app.convergence import companion_error_estimate
-                    from app.output import rewrite_summary
+                    from app.workflows.convergence import companion_error_estimate
+                    from app.io.output import rewrite_summary
 
                     s["critical"]["discretization_error"] = companion_error_estimate(
                         case.cfg, s["critical"]["growth_um"], case.outdir, sub)
@@ -220,7 +220,7 @@ def write_tables(rows: list[dict], outdir: Path, title: str, param: str) -> None
         w.writeheader()
         for r in rows:
             w.writerow({k: ("" if r[k] is None else r[k]) for k in COLUMNS})
-    from app.plots import isomode_plot, modes_gallery, study_plot
+    from app.io.plots import isomode_plot, modes_gallery, study_plot
 
     study_plot(rows, title, param, outdir / "study.png")
     modes_gallery(rows, outdir, title, outdir / "modes.png")

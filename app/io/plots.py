@@ -169,7 +169,7 @@ def modes_gallery(rows: list[dict], outdir, title: str, path) -> None:
     deformed passage outline of a tube."""
     import numpy as np
 
-    from app.wrinkles import along_profile, around_profile
+    from app.onset.wrinkles import along_profile, around_profile
 
     cases = [r for r in rows if (outdir / r["directory"] / "mode_surface.csv").is_file()]
     if not cases:

@@ -21,7 +21,7 @@ import math
 from pathlib import Path
 
 from app import config, logging_setup
-from app.run import simulate
+from app.workflows.run import simulate
 
 
 def richardson(values: list[float], ratio: float) -> dict:
@@ -162,7 +162,7 @@ def _write(outdir: Path, rows: list[dict], report: dict) -> None:
         lines.append(f"\nbase: g_c = {b['g_c_um']:.4f} um, converged estimate {b['converged_estimate_um']:.4f} um, "
                      f"estimated error {b['error_estimate_um']:.4f} um")
     (outdir / "convergence.md").write_text("\n".join(lines) + "\n")
-    from app.plots import convergence_plot
+    from app.io.plots import convergence_plot
 
     convergence_plot(rows, report, outdir / "convergence.png")
 

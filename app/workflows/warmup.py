@@ -41,7 +41,7 @@ def _merge(a: dict, b: dict) -> dict:
 
 def warmup(comm, log=print) -> float:
     """Run every case of :data:`CASES` for two tiny steps; return the wall time [s]."""
-    from app.run import simulate
+    from app.workflows.run import simulate
 
     t0 = time.perf_counter()
     tmp = tempfile.mkdtemp(prefix="hydrobuckle-warmup-") if comm.rank == 0 else None

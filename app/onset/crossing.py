@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from app.wrinkles import band_vertex, mode_wrinkle_count
+from app.onset.wrinkles import band_vertex, mode_wrinkle_count
 
 BAND_MODES = 8  # eigenpairs sampled at the unstable end to locate the minimum of lambda(N)
 

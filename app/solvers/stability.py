@@ -8,7 +8,7 @@ depend on the step sizes the adaptive integrator happened to choose.
 
 - ``inertia()``: the exact counts of negative, zero and positive eigenvalues from an LDL^T
   (MUMPS Cholesky) factorization, Sylvester's law of inertia. One factorization: with the default
-  screening (:class:`app.onset.CrossingDetector`) most steps read the Newton factor's inertia
+  screening (:class:`app.onset.crossing.CrossingDetector`) most steps read the Newton factor's inertia
   instead and this exact test only confirms the bracket of an onset.
 - ``eigenpairs(n)``: the n eigenpairs nearest zero (SLEPc Krylov-Schur, shift-invert, target 0,
   Hermitian), with the eigenvectors embedded back into the full mixed space.

@@ -1,7 +1,7 @@
 """PETSc SNES Newton solver for one incremental minimization step, with a direct (MUMPS) solve.
 
 dolfinx 0.5's own NewtonSolver is not SNES; here the residual and Hessian callbacks assemble
-the compiled forms of :mod:`app.potential` into PETSc objects that SNES drives. Options are set
+the compiled forms of :mod:`app.model.potential` into PETSc objects that SNES drives. Options are set
 under a per-instance prefix so that several problems can coexist in one process.
 """
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import ufl
 
 from app import compat
-from app.material import chemical_potential, dissipation_increment, free_energy_parts
+from app.model.material import chemical_potential, dissipation_increment, free_energy_parts
 
 
 @dataclass

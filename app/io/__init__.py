@@ -1,0 +1,1 @@
+"""Results on disk: history, summary, ParaView fields, plots."""

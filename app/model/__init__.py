@@ -1,0 +1,1 @@
+"""The physics: material law, incremental potential, loading, and the discrete problem."""

@@ -1,0 +1,1 @@
+"""The onset workflow: crossing detection and bisection, wrinkle counting."""

@@ -1,0 +1,1 @@
+"""Solvers built from forms: Newton (SNES), time stepping, stability (inertia, SLEPc)."""
