@@ -10,56 +10,12 @@ from __future__ import annotations
 import copy
 import math
 import tomllib
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-
-class ConfigError(ValueError):
-    """A bad configuration value; ``str(err)`` is a one-line message naming the key."""
-
-    def __init__(self, key: str, message: str):
-        self.key = key
-        super().__init__(f"config key '{key}': {message}" if key else message)
-
-
-@dataclass(frozen=True)
-class Key:
-    """One config key: its type, default, and a range check with a readable description."""
-
-    type: type
-    default: Any
-    check: Callable[[Any], bool] | None = None
-    allowed: str = ""
-    doc: str = ""
-    optional: bool = False  # default None allowed (inherit / not set)
-
-
-def _gt(lo):
-    return (lambda v: v > lo), f"> {lo:g}"
-
-
-def _ge(lo):
-    return (lambda v: v >= lo), f">= {lo:g}"
-
-
-def _in_open(lo, hi):
-    return (lambda v: lo < v < hi), f"in ({lo:g}, {hi:g})"
-
-
-def _in_closed(lo, hi):
-    return (lambda v: lo <= v <= hi), f"in [{lo:g}, {hi:g}]"
-
-
-def _one_of(*options):
-    return (lambda v: v in options), "one of " + ", ".join(repr(o) for o in options)
-
-
-def _key(type_, default, rng=None, doc="", optional=False):
-    check, allowed = rng if rng else (None, "")
-    return Key(type_, default, check, allowed, doc, optional)
-
+from app.schema import ConfigError, Key  # noqa: F401  (re-exported: config.ConfigError, config.Key)
+from app.schema import ge as _ge, gt as _gt, in_closed as _in_closed, in_open as _in_open
+from app.schema import key as _key, one_of as _one_of
 
 GEOMETRY_KINDS = ("bilayer", "tube", "elliptic-tube", "msh")
 BOUNDARY_ROLES = ("permeable", "impermeable", "free", "fixed", "roller_x", "roller_y")
