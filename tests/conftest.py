@@ -54,7 +54,7 @@ def run_to_end(cfg: dict, comm):
     from app.model.problem import Problem
     from app.solvers.stepping import TimeStepper
 
-    p = Problem(cfg, comm)
+    p = Problem.from_config(cfg, comm)
     st = TimeStepper(p, cfg)
     rows = [st.initial_record()]
     while not st.done():

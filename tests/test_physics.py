@@ -33,7 +33,7 @@ def test_fluid_taken_up_by_the_solid_equals_the_inflow_through_the_top(comm):
     from app.solvers.stepping import TimeStepper
 
     cfg = small_bilayer(**{"time.end": 1.2})
-    p = Problem(cfg, comm)
+    p = Problem.from_config(cfg, comm)
     st = TimeStepper(p, cfg)
     u_n, _ = ufl.split(p.state)
     F = ufl.Identity(2) + ufl.grad(u_n)

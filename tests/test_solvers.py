@@ -38,7 +38,7 @@ def test_solvers_leave_petsc_options_table_as_they_found_it(comm):
     from app.solvers.stepping import TimeStepper
 
     cfg = small_bilayer(**{"time.end": 0.02})
-    p = Problem(cfg, comm)
+    p = Problem.from_config(cfg, comm)
     before = len(PETSc.Options().getAll())
     for linear in ("direct", "iterative") * 3:
         cfg["solver"]["linear"] = linear

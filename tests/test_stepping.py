@@ -114,7 +114,7 @@ def test_newton_failure_is_cut_back_and_the_run_recovers(shared_tmp, comm):
     results = {}
     for max_it in (25, 3):
         cfg = small_bilayer(**base, **{"solver.max_it": max_it})
-        p = Problem(cfg, comm)
+        p = Problem.from_config(cfg, comm)
         s = simulate(cfg, shared_tmp / f"it{max_it}", comm, problem=p, progress=False)
         results[max_it] = (s, cell_fluid_content(p), _history(shared_tmp / f"it{max_it}"))
     ref, cut = results[25][0], results[3][0]

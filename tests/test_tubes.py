@@ -65,7 +65,7 @@ def test_impossible_tubes_are_rejected_with_the_limit():
 def _uptake_mismatch(cfg, comm) -> np.ndarray:
     """Per accepted step: (the fluid taken up by the solid, computed from u alone as the change of
     int (J J0 - 1) dV at the penalty's one point per cell, minus the inflow through the passage) / inflow."""
-    p = Problem(cfg, comm)
+    p = Problem.from_config(cfg, comm)
     st = TimeStepper(p, cfg)
     u_n, _ = ufl.split(p.state)
     form = compat.form((ufl.det(ufl.Identity(2) + ufl.grad(u_n)) * p.mat.preswelling - 1) * p.dx_coupling)
@@ -96,7 +96,7 @@ def test_tube_takes_up_the_fluid_that_enters_through_the_passage(comm):
 
 def test_circular_tube_swells_axisymmetrically(comm):
     cfg = tube_case("time.end=0.6", "stability.enabled=false")
-    p = Problem(cfg, comm)
+    p = Problem.from_config(cfg, comm)
     st = TimeStepper(p, cfg)
     while not st.done():
         rec = st.advance()

@@ -52,6 +52,11 @@ def layer_materials(cfg: dict, names=("film", "substrate")) -> dict[str, Hydroge
 class Problem:
     """The discrete incremental minimization problem of one configuration."""
 
+    @classmethod
+    def from_config(cls, cfg: dict, comm, setup: GeometrySetup | None = None) -> Problem:
+        """The problem of a resolved config (the boundary where config dicts become objects)."""
+        return cls(cfg, comm, setup)
+
     def __init__(self, cfg: dict, comm, setup: GeometrySetup | None = None):
         self.cfg, self.comm = cfg, comm
         self.geo = setup if setup is not None else geometry.build(cfg, comm)

@@ -36,7 +36,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     scfg = cfg["stability"]
     with timing.timed("setup"):
         if problem is None:
-            problem = Problem(cfg, comm)
+            problem = Problem.from_config(cfg, comm)
         stepper = TimeStepper(problem, cfg, log=log.info)
         analyzer = StabilityAnalyzer(problem, scfg["tau"]) if scfg["enabled"] else None
     mats = problem.materials
