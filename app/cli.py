@@ -82,14 +82,13 @@ def _input_error(comm, err: Exception) -> int:
 
 
 def _check_geometry(cfgs, comm, labels=None) -> None:
-    """Input errors only a geometry's file can show (a user .msh: missing, unreadable, groups the
+    """Input errors only a geometry's files can show (a user .msh: missing, unreadable, groups the
     config names but the file lacks), as ConfigError before any result directory exists."""
     from app import geometry
 
     seen = set()
     for i, cfg in enumerate(cfgs):
-        geo = cfg["geometry"]
-        key = (geo["kind"], geo.get("file"), repr(geo.get("layers")), repr(geo.get("boundaries")))
+        key = repr(sorted(cfg["geometry"].items()))
         if key in seen:
             continue
         seen.add(key)
@@ -327,15 +326,17 @@ def cmd_mesh(args) -> int:
     comm = _comm()
     try:
         cfg = config.load(args.config, args.set)
-        if cfg["geometry"]["kind"] == "msh":
-            raise config.ConfigError("geometry.kind", "'msh' already is a .msh file; allowed here: bilayer, tube, "
-                                     "elliptic-tube")
         from app import geometry
 
+        kind = geometry.kind_of(cfg)
+        if not kind.exportable:
+            able = [k.name for k in geometry.KINDS if k.exportable]
+            raise config.ConfigError("geometry.kind", f"{kind.name!r} {kind.not_exportable_because}; allowed here: "
+                                     + ", ".join(able))
         out = Path(args.output)
         if comm.rank == 0:
             out.parent.mkdir(parents=True, exist_ok=True)
-        setup = geometry.build(cfg, comm, msh_path=str(out))
+        setup = kind.build(cfg, comm, msh_path=str(out))
     except config.ConfigError as err:
         return _input_error(comm, err)
     if comm.rank == 0:

@@ -15,26 +15,8 @@ from typing import Any
 
 from app.schema import ConfigError, Key  # noqa: F401  (re-exported: config.ConfigError, config.Key)
 from app.schema import ge as _ge, gt as _gt, in_closed as _in_closed, in_open as _in_open
-from app.schema import key as _key, one_of as _one_of
+from app.schema import key as _key, one_of as _one_of, unset
 
-GEOMETRY_KINDS = ("bilayer", "tube", "elliptic-tube", "msh")
-BOUNDARY_ROLES = ("permeable", "impermeable", "free", "fixed", "roller_x", "roller_y")
-WRINKLE_MEASURES = ("auto", "along", "around")
-
-# Kind-dependent defaults (geometry and mesh keys left unset by the user). A geometry key a kind
-# does not use must stay unset: setting it is an error that names the kind's keys.
-KIND_DEFAULTS = {
-    "bilayer": {"geometry": {"length": 2.0, "substrate_thickness": 0.5, "film_thickness": 0.01},
-                "mesh": {"element_size": 0.004, "film_layers": 8}},
-    "tube": {"geometry": {"outer_radius": 1.0, "substrate_thickness": 0.2, "film_thickness": 0.02},
-             "mesh": {"element_size": 0.01, "film_layers": 4}},
-    "elliptic-tube": {"geometry": {"outer_radius": 1.0, "substrate_thickness": 0.2, "film_thickness": 0.02,
-                                   "aspect_ratio": 1.0},
-                      "mesh": {"element_size": 0.01, "film_layers": 4}},
-    "msh": {"geometry": {"file": None, "layers": None, "boundaries": None, "wrinkles": "auto"},
-            "mesh": {}},
-}
-KIND_GEOMETRY_KEYS = {kind: set(d["geometry"]) for kind, d in KIND_DEFAULTS.items()}
 LOADING_KINDS = ("swelling", "compression")
 
 MATERIAL_KEYS = {
@@ -46,19 +28,8 @@ MATERIAL_KEYS = {
     "interaction": _key(float, 0.1, _in_closed(-1.0, 2.0), "chi [-]"),
 }
 
-SCHEMA: dict[str, dict[str, Key] | dict] = {
-    "geometry": {
-        "kind": _key(str, "bilayer", _one_of(*GEOMETRY_KINDS)),
-        "length": _key(float, None, _gt(0), "L [mm] (bilayer)", optional=True),
-        "substrate_thickness": _key(float, None, _gt(0), "H [mm]", optional=True),
-        "film_thickness": _key(float, None, _gt(0), "w [mm]", optional=True),
-        "outer_radius": _key(float, None, _gt(0), "R [mm] (tubes)", optional=True),
-        "aspect_ratio": _key(float, None, _in_closed(1.0, 10.0), "a/b of the elliptic passage", optional=True),
-        "file": _key(str, None, None, "msh: path of a 2D gmsh .msh file (quadrilaterals)", optional=True),
-        "layers": _key(dict, None, None, "msh: cell physical group -> material name", optional=True),
-        "boundaries": _key(dict, None, None, "msh: facet physical group -> boundary role", optional=True),
-        "wrinkles": _key(str, None, _one_of(*WRINKLE_MEASURES), "msh: how wrinkles are counted", optional=True),
-    },
+_STATIC: dict[str, dict[str, Key] | dict] = {
+    "geometry": {},  # built from the registered geometry kinds: see _geometry_table
     "mesh": {
         "element_size": _key(float, None, _gt(0), "element length along the film surface [mm]", optional=True),
         "film_layers": _key(int, None, _in_closed(1, 200), "element layers through the film", optional=True),
@@ -127,9 +98,56 @@ SCHEMA: dict[str, dict[str, Key] | dict] = {
 }
 
 
+def schema() -> dict:
+    """The whole schema: the static tables above, with the geometry table built from the registered
+    geometry kinds (so a kind registered later, e.g. by a test, is part of it at once)."""
+    return {**_STATIC, "geometry": _geometry_table()}
+
+
+def _kinds():
+    from app import geometry
+
+    return geometry.KINDS
+
+
+def _geometry_table() -> dict:
+    """``kind`` and the union of every registered kind's keys, unset: a kind's defaults are applied
+    once the kind is known (:func:`_apply_kind_defaults`)."""
+    from app import geometry
+
+    kinds = _kinds()
+    table: dict[str, Key] = {"kind": _key(str, geometry.DEFAULT_KIND, _one_of(*kinds.names()))}
+    for kind in kinds:
+        for name, spec in kind.keys.items():
+            if name == "kind":
+                raise ValueError(f"geometry kind {kind.name!r} declares the key 'kind'")
+            if name in table and table[name].type is not spec.type:
+                raise ValueError(f"geometry.{name}: kinds declare it with different types")
+            table.setdefault(name, unset(spec))
+    return table
+
+
+def kind_defaults() -> dict:
+    """kind -> {"geometry": its keys' defaults, "mesh": its mesh-key defaults}."""
+    return {k.name: {"geometry": k.defaults(), "mesh": dict(k.mesh_defaults)} for k in _kinds()}
+
+
+def __getattr__(name: str):
+    """Names computed from the registries: SCHEMA, GEOMETRY_KINDS, KIND_DEFAULTS, KIND_GEOMETRY_KEYS."""
+    if name == "SCHEMA":
+        return schema()
+    if name == "GEOMETRY_KINDS":
+        return _kinds().names()
+    if name == "KIND_DEFAULTS":
+        return kind_defaults()
+    if name == "KIND_GEOMETRY_KEYS":
+        return {k.name: set(k.keys) for k in _kinds()}
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def defaults() -> dict:
-    """The fully resolved default configuration."""
-    return _defaults(SCHEMA)
+    """The default configuration (geometry keys unset until the kind's defaults are applied)."""
+    return _defaults(schema())
 
 
 def _defaults(schema: dict) -> dict:
@@ -154,7 +172,7 @@ def load(path: str | Path, overrides: list[str] | None = None) -> dict:
 def resolve(user: dict, overrides: list[str] | None = None) -> dict:
     """Merge a user dict and overrides into the defaults, validating every key."""
     cfg = defaults()
-    _merge(cfg, user, SCHEMA, prefix="")
+    _merge(cfg, user, schema(), prefix="")
     for item in overrides or []:
         key, value = parse_override(item)
         set_dotted(cfg, key, value)
@@ -164,19 +182,23 @@ def resolve(user: dict, overrides: list[str] | None = None) -> dict:
 
 
 def _apply_kind_defaults(cfg: dict) -> None:
-    kind = cfg["geometry"].get("kind")
-    if kind not in KIND_DEFAULTS:
+    name = cfg["geometry"].get("kind")
+    if name not in _kinds():
         return  # validate() reports the bad kind
-    for name, spec in SCHEMA["geometry"].items():
-        if name == "kind" or isinstance(spec, dict):
-            continue
-        if name not in KIND_GEOMETRY_KEYS[kind] and cfg["geometry"].get(name) is not None:
-            raise ConfigError(f"geometry.{name}", f"is not used by geometry.kind = {kind!r}; its keys are: "
-                              + ", ".join(sorted(KIND_GEOMETRY_KEYS[kind])))
-    for table in ("geometry", "mesh"):
-        for name, value in KIND_DEFAULTS[kind][table].items():
-            if cfg[table].get(name) is None:
-                cfg[table][name] = copy.deepcopy(value)
+    kind = _kinds().get(name)
+    _check_unused_geometry_keys(cfg, kind)
+    for table, values in (("geometry", kind.defaults()), ("mesh", kind.mesh_defaults)):
+        for key, value in values.items():
+            if cfg[table].get(key) is None:
+                cfg[table][key] = copy.deepcopy(value)
+
+
+def _check_unused_geometry_keys(cfg: dict, kind) -> None:
+    """A geometry key the kind does not use must stay unset."""
+    for name in _geometry_table():
+        if name != "kind" and name not in kind.keys and cfg["geometry"].get(name) is not None:
+            raise ConfigError(f"geometry.{name}", f"is not used by geometry.kind = {kind.name!r}; its keys are: "
+                              + ", ".join(sorted(kind.keys)))
 
 
 def parse_override(item: str) -> tuple[str, Any]:
@@ -195,7 +217,7 @@ def parse_override(item: str) -> tuple[str, Any]:
 def set_dotted(cfg: dict, key: str, value: Any) -> None:
     """Set a dotted key after checking that the schema knows it."""
     parts = key.split(".")
-    spec: Any = SCHEMA
+    spec: Any = schema()
     node = cfg
     for i, part in enumerate(parts):
         if isinstance(spec, Key) and spec.type is dict:  # free-form table: geometry.boundaries.NAME
@@ -280,41 +302,21 @@ def _validate_tree(cfg: dict, schema: dict, prefix: str) -> None:
 
 def validate(cfg: dict) -> None:
     """Type and range checks per key, then the checks that relate keys to each other."""
-    _validate_tree(cfg, SCHEMA, "")
-    geo, mesh, time, film = cfg["geometry"], cfg["mesh"], cfg["time"], cfg["material"]["film"]
+    sch = schema()
+    kind = _validate_geometry(cfg, sch["geometry"])
+    _validate_tree(cfg, {k: v for k, v in sch.items() if k != "geometry"}, "")
+    time, film = cfg["time"], cfg["material"]["film"]
     if film.get("shear_modulus") is not None and film.get("modulus_ratio") is not None:
         raise ConfigError("material.film.shear_modulus",
                           "set either material.film.shear_modulus or material.film.modulus_ratio, not both "
                           "(use --set material.film.modulus_ratio=... alone, or remove it from the file)")
-    kind = geo["kind"]
-    if kind == "bilayer" and mesh["element_size"] > geo["length"] / 2:
-        raise ConfigError("mesh.element_size",
-                          f"= {mesh['element_size']:g} is too coarse; allowed: <= geometry.length/2 "
-                          f"= {geo['length'] / 2:g}")
-    if kind in ("tube", "elliptic-tube"):
-        R, H, w = geo["outer_radius"], geo["substrate_thickness"], geo["film_thickness"]
-        if H + w >= R:
-            raise ConfigError("geometry.substrate_thickness",
-                              f"= {H:g}: substrate + film ({H + w:g} mm) must be thinner than "
-                              f"geometry.outer_radius = {R:g} mm; allowed: < {R - w:g}")
-        if mesh["element_size"] > (R - H - w) / 2:
-            raise ConfigError("mesh.element_size", f"= {mesh['element_size']:g} is too coarse; allowed: "
-                              f"<= passage radius/2 = {(R - H - w) / 2:g}")
-    if kind in ("tube", "elliptic-tube"):
-        from meshes.tube import GeometryError, check_geometry
-
-        try:
-            check_geometry(geo["outer_radius"], geo["substrate_thickness"], geo["film_thickness"],
-                           geo.get("aspect_ratio") or 1.0)
-        except GeometryError as err:
-            raise ConfigError(err.key, str(err)) from None
-    if kind == "tube" and geo.get("aspect_ratio") not in (None, 1.0):
-        raise ConfigError("geometry.aspect_ratio", "is for geometry.kind = 'elliptic-tube'")
-    if kind == "msh":
-        _validate_msh(cfg)
-    if cfg["loading"]["kind"] == "compression" and kind != "bilayer":
-        raise ConfigError("loading.kind", "'compression' needs geometry.kind = 'bilayer'; allowed for "
-                          f"{kind!r}: 'swelling'")
+    kind.validate(cfg)
+    if kind.named_materials:
+        _validate_material_layers(cfg, sch)
+    if cfg["loading"]["kind"] == "compression" and "drive" not in kind.provides:
+        able = [k.name for k in _kinds() if "drive" in k.provides]
+        raise ConfigError("loading.kind", "'compression' needs geometry.kind = " + " or ".join(map(repr, able))
+                          + f"; allowed for {kind.name!r}: 'swelling'")
     if time["dt_initial"] > time["dt_max"]:
         raise ConfigError("time.dt_initial", f"= {time['dt_initial']:g} must be <= time.dt_max = {time['dt_max']:g}")
     if time["dt_min"] > time["dt_initial"]:
@@ -323,35 +325,30 @@ def validate(cfg: dict) -> None:
         raise ConfigError("time.dt_initial", f"= {time['dt_initial']:g} must be <= time.end = {time['end']:g}")
 
 
-def _validate_msh(cfg: dict) -> None:
+def _validate_geometry(cfg: dict, table: dict):
+    """The geometry table: its kind, then each key with the kind's own spec (keys it does not use must
+    be unset). Returns the kind."""
     geo = cfg["geometry"]
-    if not geo.get("file"):
-        raise ConfigError("geometry.file", "must name a .msh file for geometry.kind = 'msh'")
-    layers, boundaries = geo.get("layers"), geo.get("boundaries")
-    if not layers:
-        raise ConfigError("geometry.layers", "must map cell physical groups to materials, e.g. "
-                          "{ film = \"film\", substrate = \"substrate\" }")
-    known = {"film", "substrate"} | set(cfg["material"].get("layers") or {})
-    for group, mat in layers.items():
-        if mat not in known:
-            raise ConfigError(f"geometry.layers.{group}", f"= {mat!r} is not a material; allowed: "
-                              + ", ".join(sorted(known)) + " (define more under [material.layers.NAME])")
-    if not boundaries:
-        raise ConfigError("geometry.boundaries", "must map facet physical groups to roles: "
-                          + ", ".join(BOUNDARY_ROLES))
-    for group, role in boundaries.items():
-        if role not in BOUNDARY_ROLES:
-            raise ConfigError(f"geometry.boundaries.{group}", f"= {role!r}; allowed: " + ", ".join(BOUNDARY_ROLES))
-    if "permeable" not in boundaries.values():
-        raise ConfigError("geometry.boundaries", "needs at least one 'permeable' boundary (where fluid enters)")
+    geo["kind"] = _check_value("geometry.kind", table["kind"], geo.get("kind"))
+    kind = _kinds().get(geo["kind"])
+    _check_unused_geometry_keys(cfg, kind)
+    for name, spec in table.items():
+        if name != "kind":
+            geo[name] = _check_value(f"geometry.{name}", kind.keys.get(name, spec), geo.get(name))
+    return kind
+
+
+def _validate_material_layers(cfg: dict, sch: dict) -> None:
+    """[material.layers.NAME] tables: each like [material.film]."""
+    film_keys = sch["material"]["film"]
     for name, table in (cfg["material"].get("layers") or {}).items():
         if not isinstance(table, dict):
             raise ConfigError(f"material.layers.{name}", "must be a table of material keys")
         for k, v in table.items():
-            spec = SCHEMA["material"]["film"].get(k)
+            spec = film_keys.get(k)
             if spec is None:
                 raise ConfigError(f"material.layers.{name}.{k}", "unknown key; known keys here: "
-                                  + _known(SCHEMA["material"]["film"]))
+                                  + _known(film_keys))
             table[k] = _check_value(f"material.layers.{name}.{k}", spec, v)
 
 

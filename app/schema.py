@@ -6,6 +6,7 @@ material law, loadings) can declare them without importing the config machinery.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -29,6 +30,7 @@ class Key:
     allowed: str = ""
     doc: str = ""
     optional: bool = False  # default None allowed (inherit / not set)
+    unit: str = ""
 
 
 def gt(lo):
@@ -51,6 +53,11 @@ def one_of(*options):
     return (lambda v: v in options), "one of " + ", ".join(repr(o) for o in options)
 
 
-def key(type_, default, rng=None, doc="", optional=False):
+def key(type_, default, rng=None, doc="", optional=False, unit=""):
     check, allowed = rng if rng else (None, "")
-    return Key(type_, default, check, allowed, doc, optional)
+    return Key(type_, default, check, allowed, doc, optional, unit)
+
+
+def unset(k: Key) -> Key:
+    """The same key with no default (None: not set, inherit, or filled in later)."""
+    return dataclasses.replace(k, default=None, optional=True)

@@ -4,6 +4,8 @@ The substrate [0, L] x [0, H] lies under the film [0, L] x [H, H + w]. Elements 
 the user's size; the film has ``film_layers`` uniform element layers; substrate element heights
 grow geometrically away from the film by ``grading`` starting one ratio above the film's.
 Physical groups: cells film, substrate; facets top, bottom, left, right.
+
+:func:`add_model` builds the mesh in the current gmsh model (pure gmsh; see :mod:`meshes`).
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import math
 import gmsh
 import numpy as np
 
-from app.geometry.tagged import TaggedMesh, add_physical, gmsh_session, to_dolfinx
+from meshes import add_physical
 
 CELLS = {"film": 1, "substrate": 2}
 FACETS = {"bottom": 1, "top": 2, "left": 3, "right": 4}
@@ -40,9 +42,9 @@ def film_layer_heights(w: float, layers: int, grading: float) -> np.ndarray:
     return h * (w / h.sum())
 
 
-def build(comm, length: float, substrate_thickness: float, film_thickness: float,
-          element_size: float, film_layers: int, grading: float, rank: int = 0,
-          msh_path: str | None = None, film_grading: float = 1.0) -> TaggedMesh:
+def add_model(length: float, substrate_thickness: float, film_thickness: float, element_size: float,
+              film_layers: int, grading: float, film_grading: float = 1.0) -> tuple[dict, dict, dict]:
+    """Mesh the bilayer in the current gmsh model: (cell groups, facet groups, info)."""
     L, H, w = length, substrate_thickness, film_thickness
     nx = max(1, round(L / element_size))
     film_hs = film_layer_heights(w, film_layers, film_grading)
@@ -50,31 +52,29 @@ def build(comm, length: float, substrate_thickness: float, film_thickness: float
     sub_h = substrate_layer_heights(H, film_h * grading, grading)
     info = {"elements_along_length": nx, "film_layers": film_layers, "substrate_layers": len(sub_h),
             "film_element_aspect": (L / nx) / film_hs.min(), "surface_layer_height": film_hs[-1]}
-    with gmsh_session(comm, "bilayer", rank) as active:
-        if active:
-            geo = gmsh.model.geo
-            p0, p1 = geo.addPoint(0, 0, 0), geo.addPoint(L, 0, 0)
-            base = geo.addLine(p0, p1)
-            geo.mesh.setTransfiniteCurve(base, nx + 1)
-            # Extrude upwards: heights listed bottom to top, so the finest sits under the film.
-            bottom_up = sub_h[::-1]
-            fractions = list(np.cumsum(bottom_up) / H)
-            fractions[-1] = 1.0
-            sub = geo.extrude([(1, base)], 0, H, 0, numElements=[1] * len(sub_h), heights=fractions,
-                              recombine=True)
-            film_fr = list(np.cumsum(film_hs) / w)
-            film_fr[-1] = 1.0
-            film = geo.extrude([sub[0]], 0, w, 0, numElements=[1] * film_layers, heights=film_fr, recombine=True)
-            geo.synchronize()
-            sides = [abs(t) for t in (sub[2][1], sub[3][1], film[2][1], film[3][1])]
-            left = [c for c in sides if gmsh.model.getBoundingBox(1, c)[3] < 0.5 * L]
-            right = [c for c in sides if c not in left]
-            add_physical(2, [film[1][1]], CELLS["film"], "film")
-            add_physical(2, [sub[1][1]], CELLS["substrate"], "substrate")
-            add_physical(1, [base], FACETS["bottom"], "bottom")
-            add_physical(1, [film[0][1]], FACETS["top"], "top")
-            add_physical(1, left, FACETS["left"], "left")
-            add_physical(1, right, FACETS["right"], "right")
-            gmsh.option.setNumber("Mesh.RecombineAll", 1)
-            gmsh.model.mesh.generate(2)
-        return to_dolfinx(comm, rank, CELLS, FACETS, info, msh_path)
+    geo = gmsh.model.geo
+    p0, p1 = geo.addPoint(0, 0, 0), geo.addPoint(L, 0, 0)
+    base = geo.addLine(p0, p1)
+    geo.mesh.setTransfiniteCurve(base, nx + 1)
+    # Extrude upwards: heights listed bottom to top, so the finest sits under the film.
+    bottom_up = sub_h[::-1]
+    fractions = list(np.cumsum(bottom_up) / H)
+    fractions[-1] = 1.0
+    sub = geo.extrude([(1, base)], 0, H, 0, numElements=[1] * len(sub_h), heights=fractions,
+                      recombine=True)
+    film_fr = list(np.cumsum(film_hs) / w)
+    film_fr[-1] = 1.0
+    film = geo.extrude([sub[0]], 0, w, 0, numElements=[1] * film_layers, heights=film_fr, recombine=True)
+    geo.synchronize()
+    sides = [abs(t) for t in (sub[2][1], sub[3][1], film[2][1], film[3][1])]
+    left = [c for c in sides if gmsh.model.getBoundingBox(1, c)[3] < 0.5 * L]
+    right = [c for c in sides if c not in left]
+    add_physical(2, [film[1][1]], CELLS["film"], "film")
+    add_physical(2, [sub[1][1]], CELLS["substrate"], "substrate")
+    add_physical(1, [base], FACETS["bottom"], "bottom")
+    add_physical(1, [film[0][1]], FACETS["top"], "top")
+    add_physical(1, left, FACETS["left"], "left")
+    add_physical(1, right, FACETS["right"], "right")
+    gmsh.option.setNumber("Mesh.RecombineAll", 1)
+    gmsh.model.mesh.generate(2)
+    return dict(CELLS), dict(FACETS), info

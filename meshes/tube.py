@@ -11,6 +11,9 @@ length (``element_size`` apart, a multiple of 4 in total); each film node sits o
 passage node; substrate nodes lie on the segment from the offset point radially out to the wall,
 graded away from the film like the bilayer's. Physical groups: cells film, substrate; facets
 inner (the passage surface), outer (the wall).
+
+:func:`check_geometry` rejects impossible tubes (plain numpy, usable before any mesh exists);
+:func:`add_model` builds the mesh in the current gmsh model (pure gmsh; see :mod:`meshes`).
 """
 
 from __future__ import annotations
@@ -20,8 +23,8 @@ import math
 import gmsh
 import numpy as np
 
+from meshes import add_physical
 from meshes.bilayer import film_layer_heights, substrate_layer_heights
-from app.geometry.tagged import TaggedMesh, add_physical, gmsh_session, to_dolfinx
 
 CELLS = {"film": 1, "substrate": 2}
 FACETS = {"inner": 1, "outer": 2}
@@ -33,6 +36,9 @@ class GeometryError(ValueError):
     def __init__(self, key: str, message: str):
         self.key = key
         super().__init__(message)
+
+    def __reduce__(self):  # picklable, so a builder's error can be sent to every MPI rank
+        return type(self), (self.key, str(self))
 
 
 def semi_axes(passage_radius: float, aspect_ratio: float) -> tuple[float, float]:
@@ -117,9 +123,11 @@ def check_geometry(outer_radius: float, substrate_thickness: float, film_thickne
     return {"passage_radius": r, "semi_major": a, "semi_minor": b, "min_substrate_thickness": t_min}
 
 
-def build(comm, outer_radius: float, substrate_thickness: float, film_thickness: float, element_size: float,
-          film_layers: int, grading: float, aspect_ratio: float = 1.0, rank: int = 0,
-          msh_path: str | None = None, film_grading: float = 1.0) -> TaggedMesh:
+def add_model(outer_radius: float, substrate_thickness: float, film_thickness: float, element_size: float,
+              film_layers: int, grading: float, aspect_ratio: float = 1.0,
+              film_grading: float = 1.0) -> tuple[dict, dict, dict]:
+    """Mesh the tube in the current gmsh model: (cell groups, facet groups, info); GeometryError for an
+    impossible tube."""
     R, H, w = outer_radius, substrate_thickness, film_thickness
     info = check_geometry(R, H, w, aspect_ratio)
     a, b = info["semi_major"], info["semi_minor"]
@@ -131,51 +139,48 @@ def build(comm, outer_radius: float, substrate_thickness: float, film_thickness:
     phi = passage_parameters(a, b, m)
     P, Q, C = layer_points(a, b, w, R, phi)
     n = len(phi)
-    with gmsh_session(comm, "tube", rank) as active:
-        if active:
-            geo = gmsh.model.geo
-            pP = [geo.addPoint(*p, 0) for p in P]
-            pQ = [geo.addPoint(*q, 0) for q in Q]
-            pC = [geo.addPoint(*c, 0) for c in C]
-            radial_film, radial_sub = [], []
-            for k in range(4):
-                i = k * m
-                lf = geo.addLine(pP[i], pQ[i])
-                ls = geo.addLine(pQ[i], pC[i])
-                radial_film.append(lf)
-                radial_sub.append(ls)
-            inner, mid, outer, film_s, sub_s = [], [], [], [], []
-            for k in range(4):
-                idx = [(k * m + j) % n for j in range(m + 1)]
-                ci = geo.addSpline([pP[j] for j in idx])
-                cm = geo.addSpline([pQ[j] for j in idx])
-                co = geo.addSpline([pC[j] for j in idx])
-                inner.append(ci)
-                mid.append(cm)
-                outer.append(co)
-                k1 = (k + 1) % 4
-                for c in (ci, cm, co):
-                    geo.mesh.setTransfiniteCurve(c, m + 1)
-                lf0, lf1 = radial_film[k], radial_film[k1]
-                ls0, ls1 = radial_sub[k], radial_sub[k1]
-                loop_f = geo.addCurveLoop([ci, lf1, -cm, -lf0])
-                loop_s = geo.addCurveLoop([cm, ls1, -co, -ls0])
-                film_s.append(geo.addPlaneSurface([loop_f]))
-                sub_s.append(geo.addPlaneSurface([loop_s]))
-            geo.synchronize()
-            # Connectors run outwards (passage -> interface -> wall): film layers thicken towards
-            # the interface by film_grading, substrate layers towards the wall by grading.
-            for lf in radial_film:
-                gmsh.model.mesh.setTransfiniteCurve(lf, film_layers + 1, "Progression", film_grading)
-            for ls in radial_sub:
-                gmsh.model.mesh.setTransfiniteCurve(ls, len(sub_h) + 1, "Progression", grading)
-            for s in film_s + sub_s:
-                gmsh.model.mesh.setTransfiniteSurface(s)
-                gmsh.model.mesh.setRecombine(2, s)
-            add_physical(2, film_s, CELLS["film"], "film")
-            add_physical(2, sub_s, CELLS["substrate"], "substrate")
-            add_physical(1, inner, FACETS["inner"], "inner")
-            add_physical(1, outer, FACETS["outer"], "outer")
-            gmsh.model.mesh.generate(2)
-        tm = to_dolfinx(comm, rank, CELLS, FACETS, info, msh_path)
-    return tm
+    geo = gmsh.model.geo
+    pP = [geo.addPoint(*p, 0) for p in P]
+    pQ = [geo.addPoint(*q, 0) for q in Q]
+    pC = [geo.addPoint(*c, 0) for c in C]
+    radial_film, radial_sub = [], []
+    for k in range(4):
+        i = k * m
+        lf = geo.addLine(pP[i], pQ[i])
+        ls = geo.addLine(pQ[i], pC[i])
+        radial_film.append(lf)
+        radial_sub.append(ls)
+    inner, mid, outer, film_s, sub_s = [], [], [], [], []
+    for k in range(4):
+        idx = [(k * m + j) % n for j in range(m + 1)]
+        ci = geo.addSpline([pP[j] for j in idx])
+        cm = geo.addSpline([pQ[j] for j in idx])
+        co = geo.addSpline([pC[j] for j in idx])
+        inner.append(ci)
+        mid.append(cm)
+        outer.append(co)
+        k1 = (k + 1) % 4
+        for c in (ci, cm, co):
+            geo.mesh.setTransfiniteCurve(c, m + 1)
+        lf0, lf1 = radial_film[k], radial_film[k1]
+        ls0, ls1 = radial_sub[k], radial_sub[k1]
+        loop_f = geo.addCurveLoop([ci, lf1, -cm, -lf0])
+        loop_s = geo.addCurveLoop([cm, ls1, -co, -ls0])
+        film_s.append(geo.addPlaneSurface([loop_f]))
+        sub_s.append(geo.addPlaneSurface([loop_s]))
+    geo.synchronize()
+    # Connectors run outwards (passage -> interface -> wall): film layers thicken towards
+    # the interface by film_grading, substrate layers towards the wall by grading.
+    for lf in radial_film:
+        gmsh.model.mesh.setTransfiniteCurve(lf, film_layers + 1, "Progression", film_grading)
+    for ls in radial_sub:
+        gmsh.model.mesh.setTransfiniteCurve(ls, len(sub_h) + 1, "Progression", grading)
+    for s in film_s + sub_s:
+        gmsh.model.mesh.setTransfiniteSurface(s)
+        gmsh.model.mesh.setRecombine(2, s)
+    add_physical(2, film_s, CELLS["film"], "film")
+    add_physical(2, sub_s, CELLS["substrate"], "substrate")
+    add_physical(1, inner, FACETS["inner"], "inner")
+    add_physical(1, outer, FACETS["outer"], "outer")
+    gmsh.model.mesh.generate(2)
+    return dict(CELLS), dict(FACETS), info

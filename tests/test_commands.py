@@ -328,7 +328,7 @@ def test_mesh_command_writes_the_builtin_mesh(shared_tmp, comm, capsys, text, ce
     for name in facets:
         assert contents[(1, name)] == ([1], _global_facets(builtin, name, comm))
     # read back as a user mesh: the same cells and facet groups
-    from meshes import msh as mshmod
+    from app.geometry import msh as mshmod
 
     tm = mshmod.read(comm, msh)
     assert compat.num_global_cells(tm.mesh) == n_cells

@@ -123,11 +123,11 @@ def test_bad_msh_exits_2_with_one_line_and_no_result_dir(shared_tmp, capfd, file
     """A .msh that is missing, unreadable or lacks a group the config names is bad input for every
     command that builds geometry: exit 2, one line naming the key on rank 0 (nothing on the others,
     no traceback), no result directory; checked before anything runs."""
-    from meshes import bilayer
+    from app.geometry import bilayer
 
     comm = MPI.COMM_WORLD
     good = shared_tmp / "good.msh"
-    bilayer.build(comm, 0.1, 0.05, 0.01, 0.01, 2, 1.3, msh_path=str(good))
+    bilayer.tagged_mesh(comm, 0.1, 0.05, 0.01, 0.01, 2, 1.3, msh_path=str(good))
     cfg_path = shared_tmp / "bad.toml"
     if comm.rank == 0:
         (shared_tmp / "garbage.msh").write_text("this is not a mesh\n")

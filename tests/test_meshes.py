@@ -5,6 +5,7 @@ import pytest
 import ufl
 
 from app import compat
+from app.geometry.bilayer import tagged_mesh
 from meshes import bilayer
 
 
@@ -16,7 +17,7 @@ def _measure(tm, comm, dim_measure):
 @pytest.mark.parametrize("grading", [1.0, 1.15, 1.4])
 def test_bilayer_layers_and_boundaries(comm, grading):
     L, H, w = 0.4, 0.2, 0.012
-    tm = bilayer.build(comm, L, H, w, element_size=0.02, film_layers=3, grading=grading)
+    tm = tagged_mesh(comm, L, H, w, element_size=0.02, film_layers=3, grading=grading)
     dx = ufl.Measure("dx", domain=tm.mesh, subdomain_data=tm.cell_tags)
     ds = ufl.Measure("ds", domain=tm.mesh, subdomain_data=tm.facet_tags)
     assert _measure(tm, comm, dx(tm.cell_names["film"])) == pytest.approx(L * w, rel=1e-12)

@@ -15,7 +15,8 @@ from app.model.problem import Problem
 from app.workflows.run import simulate
 from app.solvers.stepping import TimeStepper
 from app.onset.wrinkles import boundary_displacement
-from meshes import bilayer, msh, tube
+from app.geometry import bilayer, msh, tube
+from meshes import tube as tube_model
 
 
 def _areas(tm, comm):
@@ -30,11 +31,11 @@ def _areas(tm, comm):
 @pytest.mark.parametrize("ar", [1.0, 1.3, 1.5])
 def test_tube_layer_areas_match_annulus_ellipse_and_offset_curve(comm, ar):
     R, H, w = 1.0, 0.2, 0.02
-    tm = tube.build(comm, R, H, w, element_size=0.01, film_layers=3, grading=1.15, aspect_ratio=ar)
+    tm = tube.tagged_mesh(comm, R, H, w, element_size=0.01, film_layers=3, grading=1.15, aspect_ratio=ar)
     A = _areas(tm, comm)
     r = R - H - w
-    a, b = tube.semi_axes(r, ar)
-    P = tube.ellipse_perimeter(a, b)
+    a, b = tube_model.semi_axes(r, ar)
+    P = tube_model.ellipse_perimeter(a, b)
     # Steiner: the offset of a convex curve by w encloses area + P w + pi w^2
     film = P * w + math.pi * w ** 2
     substrate = math.pi * R ** 2 - (math.pi * a * b + film)
@@ -56,10 +57,10 @@ def test_tube_layer_areas_match_annulus_ellipse_and_offset_curve(comm, ar):
 
 
 def test_impossible_tubes_are_rejected_with_the_limit():
-    with pytest.raises(tube.GeometryError, match=r"aspect_ratio <= 1\.5"):
-        tube.check_geometry(1.0, 0.2, 0.02, aspect_ratio=1.9)
-    with pytest.raises(tube.GeometryError, match="must be > 0"):
-        tube.check_geometry(1.0, 0.9, 0.2)
+    with pytest.raises(tube_model.GeometryError, match=r"aspect_ratio <= 1\.5"):
+        tube_model.check_geometry(1.0, 0.2, 0.02, aspect_ratio=1.9)
+    with pytest.raises(tube_model.GeometryError, match="must be > 0"):
+        tube_model.check_geometry(1.0, 0.9, 0.2)
 
 
 def _uptake_mismatch(cfg, comm) -> np.ndarray:
@@ -190,8 +191,8 @@ def test_bilayer_msh_round_trip_gives_the_same_onset(shared_tmp, comm):
     cfg = config.resolve(SWELLING)
     msh_path = shared_tmp / "bilayer.msh"
     g, m = cfg["geometry"], cfg["mesh"]
-    bilayer.build(comm, g["length"], g["substrate_thickness"], g["film_thickness"], m["element_size"],
-                  m["film_layers"], m["substrate_grading"], msh_path=str(msh_path))
+    bilayer.tagged_mesh(comm, g["length"], g["substrate_thickness"], g["film_thickness"], m["element_size"],
+                        m["film_layers"], m["substrate_grading"], msh_path=str(msh_path))
     comm.barrier()
     user = {**SWELLING, "geometry": {"kind": "msh", "file": str(msh_path),
                                      "layers": {"film": "film", "substrate": "substrate"},

@@ -112,9 +112,12 @@ def build_cases(base_cfg_user: dict, param: str, values: list, outdir: Path, ove
             except config.ConfigError as err:
                 raise config.ConfigError("", f"{err} (case {param} = {_format_value(v)})") from None
             if scale_mesh_with_film and param == "geometry.film_thickness":
-                # keep film elements' shape: element length along the film <= 0.4 w (bilayer), 0.5 w (tube)
-                f = 0.4 if cfg["geometry"]["kind"] == "bilayer" else 0.5
-                cfg["mesh"]["element_size"] = min(cfg["mesh"]["element_size"], f * v)
+                # keep film elements' shape: element length along the film <= f w, f the kind's (bilayer 0.4, tubes 0.5)
+                from app import geometry
+
+                f = geometry.kind_of(cfg).film_element_fraction
+                if f is not None:
+                    cfg["mesh"]["element_size"] = min(cfg["mesh"]["element_size"], f * v)
             cfg["output"]["fields"] = False
             cfg["stability"]["error_estimate"] = error_estimate
             if isomodes:

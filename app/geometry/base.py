@@ -1,0 +1,130 @@
+"""What a geometry kind is: the base class every kind fills in, the registry of kinds, and the
+:class:`GeometrySetup` a kind's builder hands to the problem.
+
+Boundary roles (mechanics + chemistry; which loading uses them how is :mod:`app.model.loading`'s):
+
+- ``permeable``: traction-free; chemical potential prescribed (the ramp), fluid enters here;
+- ``impermeable`` / ``free``: traction-free, zero normal flux;
+- ``fixed``: u = 0, zero normal flux (a rigid impermeable wall);
+- ``roller_x`` / ``roller_y``: u_x = 0 / u_y = 0, zero normal flux (symmetry or sliding support).
+
+Growth: ``mean_normal`` is the mean displacement of the permeable surface along the body's outward
+normal there (bilayer: mean u_y of the top; tube: mean inward radial displacement of the passage);
+``mean_radial`` (tubes) is the mean inward radial displacement of the passage's nodes;
+``vertex`` is the inward displacement of one surface point (the elliptic passage's minor-axis vertex,
+the paper's g_c,x). Wrinkles are counted ``along`` an open surface (half-waves) or ``around`` a
+closed one (integer wavenumber).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+from app.registry import Registry
+from app.schema import ConfigError, Key
+
+BOUNDARY_ROLES = ("permeable", "impermeable", "free", "fixed", "roller_x", "roller_y")
+# displacement components a role holds at zero
+HELD_COMPONENTS = {"fixed": (0, 1), "roller_x": (0,), "roller_y": (1,)}
+
+
+@dataclass(frozen=True)
+class Drive:
+    """A boundary a displacement loading may move: facet group, displacement component, and the length
+    that turns an applied strain into a displacement."""
+
+    group: str
+    component: int
+    length: float
+
+
+@dataclass
+class GeometrySetup:
+    tm: object  # app.geometry.tagged.TaggedMesh
+    layers: dict[str, str]  # cell group -> material name
+    boundaries: dict[str, str]  # facet group -> role
+    growth: str = "mean_normal"  # or "mean_radial", "vertex"
+    growth_point: tuple[float, float] | None = None
+    growth_direction: tuple[float, float] | None = None  # inward unit vector at growth_point
+    wrinkles: str = "along"  # or "around"
+    plot_band: float | None = None  # bilayer: plot only this depth under the surface [mm]
+    drive: Drive | None = None  # the boundary a displacement loading moves (None: none)
+    info: dict = field(default_factory=dict)
+
+    def facets_with_role(self, *roles: str) -> list[str]:
+        return [name for name, role in self.boundaries.items() if role in roles]
+
+    def material_under(self, role: str, comm) -> str:
+        """The material of most cells next to the facets of ``role`` ("film" if there are none): the
+        surface chemical potential ramp starts at its mu0."""
+        from app import compat
+
+        domain = self.tm.mesh
+        tdim = domain.topology.dim
+        domain.topology.create_connectivity(tdim - 1, tdim)
+        f2c = domain.topology.connectivity(tdim - 1, tdim)
+        n_owned = compat.num_owned_cells(domain)
+        group_of_cell = {}
+        for group in self.layers:
+            for c in self.tm.cells(group):
+                group_of_cell[int(c)] = group
+        counts: dict[str, int] = {}
+        for g in self.facets_with_role(role):
+            for f in self.tm.facets(g):
+                for c in f2c.links(f):
+                    if c < n_owned and int(c) in group_of_cell:
+                        name = self.layers[group_of_cell[int(c)]]
+                        counts[name] = counts.get(name, 0) + 1
+        totals: dict[str, int] = {}
+        for part in comm.allgather(counts):
+            for k, v in part.items():
+                totals[k] = totals.get(k, 0) + v
+        return max(sorted(totals), key=lambda k: totals[k]) if totals else "film"
+
+
+class GeometryKind:
+    """One value of ``geometry.kind``. A kind declares its keys and defaults, checks a config before
+    anything runs, and builds the tagged mesh with what it means for the problem. Subclass it, then
+    register an instance (:data:`KINDS`); the config schema, ``hydrobuckle mesh`` and the studies ask
+    the kind, never its name."""
+
+    name: ClassVar[str] = ""
+    # geometry.* keys of this kind (besides ``kind``): default, range, doc
+    keys: ClassVar[dict[str, Key]] = {}
+    # this kind's defaults of mesh.element_size and mesh.film_layers
+    mesh_defaults: ClassVar[dict] = {}
+    # `hydrobuckle mesh` can write it as .msh (else: why not, for the message)
+    exportable: ClassVar[bool] = True
+    not_exportable_because: ClassVar[str] = ""
+    # film-thickness studies keep film elements' shape: element size <= this x film thickness
+    # (None: the kind has no film thickness to scale with)
+    film_element_fraction: ClassVar[float | None] = None
+    # what a loading may need from the geometry, e.g. "drive" (a boundary to move: GeometrySetup.drive)
+    provides: ClassVar[frozenset[str]] = frozenset()
+    # cell groups map to named materials, so [material.layers.NAME] applies
+    named_materials: ClassVar[bool] = False
+
+    def defaults(self) -> dict:
+        return {name: k.default for name, k in self.keys.items()}
+
+    def validate(self, cfg: dict) -> None:
+        """Checks that relate this kind's keys to each other and to the mesh keys (ConfigError)."""
+
+    def check_input(self, cfg: dict, comm) -> None:
+        """Input errors only the kind's files can show, without building a mesh (ConfigError on every
+        rank). Commands call this before they create any result."""
+
+    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+        """The tagged mesh and what it means; with ``msh_path`` also write the mesh as .msh."""
+        raise NotImplementedError
+
+
+KINDS: Registry[GeometryKind] = Registry("geometry kind")
+
+
+def kind_of(cfg: dict) -> GeometryKind:
+    name = cfg["geometry"]["kind"]
+    if name not in KINDS:
+        raise ConfigError("geometry.kind", f"unsupported kind {name!r}")
+    return KINDS.get(name)

@@ -1,0 +1,53 @@
+"""Geometry kind ``bilayer``: the paper's flat film on a substrate (Fig. "bi_geo"): u_x = 0 left and
+right, u_y = 0 at the bottom, fluid enters at the top; a displacement loading moves the right edge."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from app.geometry.base import Drive, GeometryKind, GeometrySetup
+from app.schema import ConfigError, gt, key
+
+if TYPE_CHECKING:
+    from app.geometry.tagged import TaggedMesh
+
+
+class Bilayer(GeometryKind):
+    name = "bilayer"
+    keys = {
+        "length": key(float, 2.0, gt(0), "L [mm] (bilayer)", unit="mm"),
+        "substrate_thickness": key(float, 0.5, gt(0), "H [mm]", unit="mm"),
+        "film_thickness": key(float, 0.01, gt(0), "w [mm]", unit="mm"),
+    }
+    mesh_defaults = {"element_size": 0.004, "film_layers": 8}
+    film_element_fraction = 0.4
+    provides = frozenset({"drive"})
+
+    def validate(self, cfg: dict) -> None:
+        geo, mesh = cfg["geometry"], cfg["mesh"]
+        if mesh["element_size"] > geo["length"] / 2:
+            raise ConfigError("mesh.element_size",
+                              f"= {mesh['element_size']:g} is too coarse; allowed: <= geometry.length/2 "
+                              f"= {geo['length'] / 2:g}")
+
+    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+        geo, mesh = cfg["geometry"], cfg["mesh"]
+        tm = tagged_mesh(comm, geo["length"], geo["substrate_thickness"], geo["film_thickness"],
+                         mesh["element_size"], mesh["film_layers"], mesh["substrate_grading"],
+                         film_grading=mesh["film_grading"], msh_path=msh_path)
+        return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},
+                             {"left": "roller_x", "right": "roller_x", "bottom": "roller_y", "top": "permeable"},
+                             wrinkles="along", plot_band=6 * geo["film_thickness"],
+                             drive=Drive("right", 0, geo["length"]))
+
+
+def tagged_mesh(comm, length: float, substrate_thickness: float, film_thickness: float, element_size: float,
+                film_layers: int, grading: float, rank: int = 0, msh_path: str | None = None,
+                film_grading: float = 1.0) -> TaggedMesh:
+    """The bilayer mesh of :func:`meshes.bilayer.add_model`, built on ``rank`` and distributed."""
+    from app.geometry.tagged import mesh_from_builder
+    from meshes import bilayer
+
+    return mesh_from_builder(comm, "bilayer", bilayer.add_model, length, substrate_thickness, film_thickness,
+                             element_size, film_layers, grading, film_grading=film_grading, msh_path=msh_path,
+                             rank=rank)

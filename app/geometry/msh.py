@@ -1,0 +1,116 @@
+"""Geometry kind ``msh``: the user's own 2D gmsh ``.msh`` file (quadrilaterals) whose physical groups the
+config maps to materials (``geometry.layers``) and boundary roles (``geometry.boundaries``).
+
+The file is read on rank 0 (:func:`meshes.msh.merge`) and distributed; a file that is missing, unreadable
+or lacks a named group is a ConfigError on every rank, found before anything runs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from app.geometry.base import BOUNDARY_ROLES, GeometryKind, GeometrySetup
+from app.schema import ConfigError, key, one_of
+
+WRINKLE_MEASURES = ("auto", "along", "around")
+
+if TYPE_CHECKING:
+    from app.geometry.tagged import TaggedMesh
+
+
+class UserMsh(GeometryKind):
+    name = "msh"
+    keys = {
+        "file": key(str, None, None, "msh: path of a 2D gmsh .msh file (quadrilaterals)", optional=True),
+        "layers": key(dict, None, None, "msh: cell physical group -> material name", optional=True),
+        "boundaries": key(dict, None, None, "msh: facet physical group -> boundary role", optional=True),
+        "wrinkles": key(str, "auto", one_of(*WRINKLE_MEASURES), "msh: how wrinkles are counted"),
+    }
+    exportable = False
+    not_exportable_because = "already is a .msh file"
+    named_materials = True
+
+    def validate(self, cfg: dict) -> None:
+        geo = cfg["geometry"]
+        if not geo.get("file"):
+            raise ConfigError("geometry.file", "must name a .msh file for geometry.kind = 'msh'")
+        layers, boundaries = geo.get("layers"), geo.get("boundaries")
+        if not layers:
+            raise ConfigError("geometry.layers", "must map cell physical groups to materials, e.g. "
+                              "{ film = \"film\", substrate = \"substrate\" }")
+        known = {"film", "substrate"} | set(cfg["material"].get("layers") or {})
+        for group, mat in layers.items():
+            if mat not in known:
+                raise ConfigError(f"geometry.layers.{group}", f"= {mat!r} is not a material; allowed: "
+                                  + ", ".join(sorted(known)) + " (define more under [material.layers.NAME])")
+        if not boundaries:
+            raise ConfigError("geometry.boundaries", "must map facet physical groups to roles: "
+                              + ", ".join(BOUNDARY_ROLES))
+        for group, role in boundaries.items():
+            if role not in BOUNDARY_ROLES:
+                raise ConfigError(f"geometry.boundaries.{group}", f"= {role!r}; allowed: " + ", ".join(BOUNDARY_ROLES))
+        if "permeable" not in boundaries.values():
+            raise ConfigError("geometry.boundaries", "needs at least one 'permeable' boundary (where fluid enters)")
+
+    def check_input(self, cfg: dict, comm) -> None:
+        """The file must exist and be a readable quadrilateral gmsh mesh with every cell group given a
+        material and every named group present."""
+        geo = cfg["geometry"]
+        cells, facets = physical_groups(comm, geo["file"])
+        _check_groups(geo, cells, facets)
+
+    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+        geo = cfg["geometry"]
+        from app.geometry.tagged import is_closed
+
+        tm = read(comm, geo["file"])
+        _check_groups(geo, tm.cell_names, tm.facet_names)
+        wrinkles = geo.get("wrinkles") or "auto"
+        if wrinkles == "auto":
+            wrinkles = "around" if is_closed(tm, [g for g, r in geo["boundaries"].items()
+                                                  if r == "permeable"]) else "along"
+        return GeometrySetup(tm, dict(geo["layers"]), dict(geo["boundaries"]), wrinkles=wrinkles)
+
+
+def read(comm, path: str | Path, rank: int = 0) -> TaggedMesh:
+    """The mesh of a .msh file, distributed; ConfigError (key ``geometry.file``) on every rank if the file
+    is missing, unreadable, has no 2D physical groups or cells other than quadrilaterals."""
+    from app.geometry.tagged import gmsh_session, to_dolfinx
+
+    path = Path(path)
+    with gmsh_session(comm, "user-msh", rank) as active:
+        cells, facets = _merge(comm, path, rank, active)
+        return to_dolfinx(comm, rank, cells, facets, {"file": str(path)})
+
+
+def physical_groups(comm, path: str | Path, rank: int = 0) -> tuple[dict[str, int], dict[str, int]]:
+    """(cell groups, facet groups) of a .msh file as name -> tag on every rank, with the same checks as
+    :func:`read` but without building the mesh (for input checks before anything runs)."""
+    from app.geometry.tagged import gmsh_session
+
+    with gmsh_session(comm, "user-msh-groups", rank) as active:
+        return _merge(comm, Path(path), rank, active)
+
+
+def _merge(comm, path: Path, rank: int, active: bool):
+    from app.geometry.tagged import on_gmsh_rank
+    from meshes import msh
+
+    result = on_gmsh_rank(comm, rank, active, msh.merge, path)
+    if isinstance(result, str):
+        raise ConfigError("geometry.file", f"= '{path}' {result}")
+    return result
+
+
+def _check_groups(geo: dict, cells, facets) -> None:
+    for group in geo["layers"]:
+        if group not in cells:
+            raise ConfigError(f"geometry.layers.{group}", "is not a cell physical group of "
+                              f"{geo['file']}; its groups: " + ", ".join(sorted(cells)))
+    for group in geo["boundaries"]:
+        if group not in facets:
+            raise ConfigError(f"geometry.boundaries.{group}", "is not a facet physical group of "
+                              f"{geo['file']}; its groups: " + (", ".join(sorted(facets)) or "none"))
+    missing = sorted(set(cells) - set(geo["layers"]))
+    if missing:
+        raise ConfigError("geometry.layers", "gives no material to the cell group(s) " + ", ".join(missing))
