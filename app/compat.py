@@ -226,6 +226,13 @@ def interpolate(target: fem.Function, source) -> None:
     target.interpolate(source)
 
 
+def form_signature(compiled) -> str:
+    """The signature of a compiled form: equal signatures, the same generated kernel (one JIT-cache entry)."""
+    import cffi
+
+    return cffi.FFI().string(compiled.ufcx_form.signature).decode()
+
+
 def expression(ufl_expr, V):
     """A compiled UFL expression evaluated at the interpolation points of V."""
     return fem.Expression(ufl_expr, V.element.interpolation_points())

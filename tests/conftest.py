@@ -49,17 +49,25 @@ def small_bilayer(**overrides) -> dict:
     return config.resolve(user, [f"{k}={v}" for k, v in overrides.items()])
 
 
+def time_stepper(problem, cfg: dict):
+    """A TimeStepper with the [time] and [solver] settings of a resolved config."""
+    from app.solvers.stepping import TimeStepper
+    from app.workflows.run import RunSettings
+
+    settings = RunSettings.from_config(cfg)
+    return TimeStepper(problem, settings.time, settings.solver)
+
+
 def run_to_end(cfg: dict, comm):
     """Integrate a config to time.end without the stability test: (problem, stepper, records)."""
     from app.model.problem import Problem
-    from app.solvers.stepping import TimeStepper
 
     p = Problem.from_config(cfg, comm)
-    st = TimeStepper(p, cfg)
+    st = time_stepper(p, cfg)
     rows = [st.initial_record()]
     while not st.done():
         rows.append(st.advance())
-    st.solver.destroy()
+    st.destroy()
     return p, st, rows
 
 

@@ -18,7 +18,7 @@ from mpi4py import MPI
 
 from app import config
 from app.model.material import Hydrogel
-from app.io.output import RESULT_FILES, ResultWriter
+from app.io.output import RESULT_FILES, OutputSettings, ResultWriter
 from app.workflows.run import simulate
 from app.model.theory import film_wrinkling_strain, film_wrinkling_wavelength, plane_strain_modulus
 
@@ -56,7 +56,7 @@ def test_a_new_run_removes_the_stale_results_of_an_earlier_one(shared_tmp, comm)
 
     second = config.resolve(SWELLING, ["geometry.length=0.15", "mesh.element_size=0.01", "time.end=0.2",
                                        "stability.enabled=false"])
-    writer = ResultWriter(out, comm, second)
+    writer = ResultWriter(out, comm, second, OutputSettings.from_config(second))
     left = {name for name in RESULT_FILES if (out / name).exists()}
     assert left == {"config.toml"}
     assert config.load(out / "config.toml") == second

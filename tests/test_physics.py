@@ -4,7 +4,7 @@ and the Terzaghi-type early-time behaviour (growth and inflow) through the error
 
 import numpy as np
 import pytest
-from conftest import run_to_end, small_bilayer
+from conftest import run_to_end, small_bilayer, time_stepper
 from mpi4py import MPI
 from scipy.optimize import brentq
 
@@ -30,11 +30,10 @@ def test_fluid_taken_up_by_the_solid_equals_the_inflow_through_the_top(comm):
 
     from app import compat
     from app.model.problem import Problem
-    from app.solvers.stepping import TimeStepper
 
     cfg = small_bilayer(**{"time.end": 1.2})
     p = Problem.from_config(cfg, comm)
-    st = TimeStepper(p, cfg)
+    st = time_stepper(p, cfg)
     u_n, _ = ufl.split(p.state)
     F = ufl.Identity(2) + ufl.grad(u_n)
     m = p.mat
@@ -51,7 +50,7 @@ def test_fluid_taken_up_by_the_solid_equals_the_inflow_through_the_top(comm):
         rows.append(st.advance())
         taken_up.append(compat.assemble_scalar(uptake_form, comm) - v_u0)
         max_ux = max(max_ux, comm.allreduce(float(np.abs(p.state.x.array[ux]).max(initial=0.0)), op=MPI.MAX))
-    st.solver.destroy()
+    st.destroy()
     inflow = np.array([r.inflow for r in rows[1:]])
     assert inflow[-1] > 10 * rows[0].fluid_volume  # fluid really entered (measured 30 times v0)
     g = np.array([r.growth_mm for r in rows])

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import pytest
 from cases import swelling_case
 
-from app.onset.crossing import CrossingDetector
+from app.onset.screening import StabilityScreen
 from app.workflows.run import simulate
 
 
@@ -84,7 +84,7 @@ def _drive(screen, exact, steps=10, keep=4):
     """Step until the detector confirms a crossing; return (detector, analyzer, bracket)."""
     stepper = ScriptedStepper(screen)
     analyzer = ScriptedAnalyzer(stepper, exact)
-    det = CrossingDetector(stepper, analyzer, "newton", keep=keep)
+    det = StabilityScreen(stepper, analyzer, "newton", keep=keep)
     count = det.start()
     for k in range(1, steps + 1):
         stepper.t = float(k)

@@ -2,7 +2,7 @@
 to exact tests where the Newton solver has no LDL^T factor."""
 
 import pytest
-from conftest import small_bilayer
+from conftest import small_bilayer, time_stepper
 
 from app.workflows.run import simulate
 
@@ -35,14 +35,13 @@ def test_solvers_leave_petsc_options_table_as_they_found_it(comm):
     from petsc4py import PETSc
 
     from app.model.problem import Problem
-    from app.solvers.stepping import TimeStepper
 
     cfg = small_bilayer(**{"time.end": 0.02})
     p = Problem.from_config(cfg, comm)
     before = len(PETSc.Options().getAll())
     for linear in ("direct", "iterative") * 3:
         cfg["solver"]["linear"] = linear
-        st = TimeStepper(p, cfg)
+        st = time_stepper(p, cfg)
         st.advance()
         assert len(PETSc.Options().getAll()) == before
-        st.solver.destroy()
+        st.destroy()

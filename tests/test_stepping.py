@@ -20,7 +20,7 @@ from mpi4py import MPI
 from app import cli, compat, config
 from app.model.problem import Problem
 from app.workflows.run import simulate
-from app.solvers.stepping import CUTBACK, GROW_MAX, SAFETY, SHRINK_MIN
+from app.solvers.step_control import CUTBACK, GROW_MAX, SAFETY, SHRINK_MIN
 
 
 def _write(path, text):

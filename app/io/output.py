@@ -11,6 +11,7 @@ import csv
 import json
 import math
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -58,13 +59,29 @@ def rewrite_summary(outdir, comm, summary: dict) -> None:
     comm.barrier()
 
 
-class ResultWriter:
-    """Writes one run's results into ``outdir``."""
+@dataclass(frozen=True)
+class OutputSettings:
+    """The [output] table: which result files a run writes besides history and summary."""
 
-    def __init__(self, outdir: str | Path, comm, cfg: dict, columns=None):
+    fields: bool = True  # fields.xdmf
+    every: int = 1  # fields every n accepted steps
+    plot: bool = True  # history.png, mode.png
+
+    @classmethod
+    def from_config(cls, cfg: dict) -> OutputSettings:
+        o = cfg["output"]
+        return cls(o["fields"], o["every"], o["plot"])
+
+
+class ResultWriter:
+    """Writes one run's results into ``outdir``: what ``settings`` asks for, and the resolved ``cfg``
+    as config.toml (the record of the run)."""
+
+    def __init__(self, outdir: str | Path, comm, cfg: dict, settings: OutputSettings, columns=None):
         self.outdir = Path(outdir)
         self.comm = comm
         self.cfg = cfg
+        self.settings = settings
         self.rank0 = comm.rank == 0
         self.columns = list(columns) if columns else None
         self._csv = None
@@ -102,7 +119,9 @@ class ResultWriter:
     # --- fields ----------------------------------------------------------------------------
 
     def setup_fields(self, problem) -> None:
-        """Compile the post-processing expressions once (see :data:`FIELDS`)."""
+        """Compile the post-processing expressions once (see :data:`FIELDS`), if fields are written."""
+        if not self.settings.fields:
+            return
         from app.io.xdmf import FieldSeries
 
         domain = problem.domain
@@ -113,8 +132,9 @@ class ResultWriter:
             f.name = name
             self._fields.append((f, compat.expression(expr, space)))
 
-    def write_fields(self, t: float) -> None:
-        if self._xdmf is None:
+    def write_fields(self, t: float, step: int = 0) -> None:
+        """The fields at time t, if they are written at accepted step number ``step``."""
+        if self._xdmf is None or step % self.settings.every:
             return
         with timing.timed("output"):
             for f, expr in self._fields:
@@ -157,7 +177,7 @@ class ResultWriter:
             t, un, _ = along_profile(coords, disp)
             profile = (t - t.min(), un / (np.abs(un).max() or 1.0), "position along the surface [mm]",
                        "normal mode displacement")
-        if self.rank0 and self.cfg["output"]["plot"]:
+        if self.rank0 and self.settings.plot:
             from app.io.plots import mode_plot
 
             mode_plot(polys, profile, problem.geo, crossing, self.outdir / "mode.png")
@@ -168,8 +188,8 @@ class ResultWriter:
         rewrite_summary(self.outdir, self.comm, data)
 
     def plot_history(self, critical: dict | None = None) -> None:
-        """history.png; ``critical`` (the summary's block) marks the onset (t_c, g_c)."""
-        if not self.rank0 or not self.rows:
+        """history.png, if plots are written; ``critical`` (the summary's block) marks the onset (t_c, g_c)."""
+        if not self.rank0 or not self.rows or not self.settings.plot:
             return
         from app.io.plots import history_plot
 

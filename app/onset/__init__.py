@@ -1,1 +1,3 @@
-"""The onset workflow: crossing detection and bisection, wrinkle counting."""
+"""The onset workflow: the tracker that owns the [stability] table (tracker.py), the per-step screen
+(screening.py), bisection of a crossing (bisection.py), the crossing record (crossing.py), what happens
+after a crossing (policy.py), and wrinkle counting (wrinkles.py)."""

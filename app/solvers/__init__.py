@@ -1,1 +1,2 @@
-"""Solvers built from forms: Newton (SNES), time stepping, stability (inertia, SLEPc)."""
+"""Solvers built from forms, boundary conditions and their own work data: Newton (SNES), MUMPS options,
+step-size control, time stepping, stability (inertia, SLEPc)."""

@@ -1,13 +1,14 @@
 """PETSc SNES Newton solver for one incremental minimization step, with a direct (MUMPS) solve.
 
 dolfinx 0.5's own NewtonSolver is not SNES; here the residual and Hessian callbacks assemble
-the compiled forms of :mod:`app.model.potential` into PETSc objects that SNES drives. Options are set
-under a per-instance prefix so that several problems can coexist in one process.
+compiled forms into PETSc objects that SNES drives. The solver is built from those forms, their
+Dirichlet conditions and the unknown function ``w`` they are written in, and owns its work
+vectors; it writes only ``w`` (the solution). Options live under a per-instance prefix
+(:mod:`app.solvers.mumps`) so that several solvers can coexist in one process.
 """
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,8 +16,27 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from app import compat, timing
+from app.solvers import mumps
 
-_ids = itertools.count()
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """The [solver] table: Newton tolerances and the linear solver of each Newton step."""
+
+    rtol: float
+    atol: float
+    max_it: int
+    factorization: str = "cholesky"  # MUMPS LDL^T or LU (direct)
+    linear: str = "direct"  # or "iterative": MINRES + block AMG
+    ksp_rtol: float = 1e-10
+    ksp_max_it: int = 2000
+    line_search: str = "basic"
+
+    @classmethod
+    def from_config(cls, cfg: dict) -> SolverSettings:
+        s = cfg["solver"]
+        return cls(s["rtol"], s["atol"], s["max_it"], s["factorization"], s["linear"], s["ksp_rtol"],
+                   s["ksp_max_it"])
 
 
 @dataclass
@@ -28,41 +48,42 @@ class NewtonResult:
 
 
 class NewtonSolver:
-    """SNES (newtonls) on R(w) = 0 with Jacobian K; w is ``problem.w``."""
+    """SNES (newtonls) on R(w) = 0 with Jacobian K, in place on the function ``w``.
 
-    def __init__(self, problem, rtol: float, atol: float, max_it: int, line_search: str = "basic",
-                 factorization: str = "cholesky", linear: str = "direct", ksp_rtol: float = 1e-10,
-                 ksp_max_it: int = 2000):
-        self.problem = problem
-        forms = problem.forms
-        self.A = compat.create_matrix(forms.hessian)
+    ``fields`` ({"u": dofs, "q": dofs}, local indices in w's space) are the blocks of the iterative
+    solver's field-split preconditioner; the direct solver does not need them."""
+
+    def __init__(self, residual, hessian, bcs, w, settings: SolverSettings, comm, fields: dict | None = None):
+        self.residual_form, self.hessian_form = residual, hessian
+        self.bcs, self.w, self.comm = bcs, w, comm
+        self.A = compat.create_matrix(hessian)
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-        self.b = compat.create_vector(forms.residual)
+        self.b = compat.create_vector(residual)
         self.x = self.b.duplicate()
         self._g = self.b.duplicate()  # Dirichlet values at the constrained dofs, 0 elsewhere
-        self._bc_dofs = compat.owned_bc_dofs(problem.bcs, problem.W)
+        self._bc_dofs = compat.owned_bc_dofs(bcs, w.function_space)
         self._lifting = True
-        self.prefix = f"hb{next(_ids)}_"
-        opts = PETSc.Options()
-        settings = {
+        linear = settings.linear
+        options = {
             "snes_type": "newtonls",
-            "snes_linesearch_type": line_search,
-            "snes_rtol": rtol,
-            "snes_atol": atol,
+            "snes_linesearch_type": settings.line_search,
+            "snes_rtol": settings.rtol,
+            "snes_atol": settings.atol,
             "snes_stol": 0.0,
-            "snes_max_it": max_it,
-            "snes_max_funcs": 100 * max_it,
+            "snes_max_it": settings.max_it,
+            "snes_max_funcs": 100 * settings.max_it,
         }
-        settings.update(self._direct_options(factorization) if linear == "direct"
-                        else self._iterative_options(ksp_rtol, ksp_max_it))
-        for key, value in settings.items():
-            opts[self.prefix + key] = value
-        self._option_keys = [self.prefix + key for key in settings]
-        self.factorization = factorization if linear == "direct" else None
+        # K is symmetric (a Hessian): MUMPS LDL^T, valid also where K is indefinite (past an onset), with
+        # the controls that make its inertia exact (the stability screen reads it)
+        options.update(mumps.direct(settings.factorization) if linear == "direct"
+                       else self._iterative_options(settings.ksp_rtol, settings.ksp_max_it))
+        self._options = mumps.PrefixedOptions("hb", options)
+        self.prefix = self._options.prefix
+        self.factorization = settings.factorization if linear == "direct" else None
         self.linear = linear
         self.last_iterations = 0
         self.linear_iterations = 0  # Krylov iterations of all solves (iterative mode)
-        self.snes = PETSc.SNES().create(problem.comm)
+        self.snes = PETSc.SNES().create(comm)
         self.snes.setOptionsPrefix(self.prefix)
         self.snes.setFunction(self._residual, self.b)
         self.snes.setJacobian(self._jacobian, self.A)
@@ -70,22 +91,9 @@ class NewtonSolver:
         ksp = self.snes.getKSP()
         ksp.setFromOptions()
         if linear == "iterative":
-            u_is, q_is = self._field_index_sets()
+            u_is, q_is = self._field_index_sets(fields)
             ksp.getPC().setFieldSplitIS(("u", u_is), ("q", q_is))
         ksp.getPC().setFromOptions()
-
-    @staticmethod
-    def _direct_options(factorization: str) -> dict:
-        return {
-            "ksp_type": "preonly",
-            # K is symmetric (a Hessian): MUMPS LDL^T, valid also where K is indefinite (past an onset)
-            "pc_type": factorization,
-            "pc_factor_mat_solver_type": "mumps",
-            # inertia of the factor (stability screening): null-pivot detection, and no ScaLAPACK
-            # on the root node, without which MUMPS cannot count negative pivots in parallel
-            "mat_mumps_icntl_24": 1,
-            "mat_mumps_icntl_13": 1,
-        }
 
     @staticmethod
     def _iterative_options(rtol: float, max_it: int) -> dict:
@@ -108,14 +116,14 @@ class NewtonSolver:
             "fieldsplit_q_pc_hypre_type": "boomeramg",
         }
 
-    def _field_index_sets(self):
+    def _field_index_sets(self, fields: dict):
         """Global indices of the owned displacement and flux dofs of the mixed space."""
-        p = self.problem
-        n_owned = compat.owned_size(p.W)
-        return [compat.owned_index_set(p.W, dofs[dofs < n_owned], p.comm) for dofs in (p.u_dofs, p.q_dofs)]
+        W = self.w.function_space
+        n_owned = compat.owned_size(W)
+        return [compat.owned_index_set(W, dofs[dofs < n_owned], self.comm) for dofs in (fields["u"], fields["q"])]
 
     def _sync_solution(self, x: PETSc.Vec) -> None:
-        w = self.problem.w
+        w = self.w
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         x.copy(compat.function_vector(w))
         compat.function_vector(w).ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
@@ -123,32 +131,32 @@ class NewtonSolver:
     def _residual(self, snes, x, b):
         with timing.timed("assembly"):
             self._sync_solution(x)
-            compat.assemble_residual_into(b, self.problem.forms.residual, self.problem.forms.hessian,
-                                          self.problem.bcs, x, lifting=self._lifting)
+            compat.assemble_residual_into(b, self.residual_form, self.hessian_form, self.bcs, x,
+                                          lifting=self._lifting)
 
     def _needs_lifting(self, x: PETSc.Vec) -> bool:
         """Whether the initial guess misses the Dirichlet values (then the residual needs the lifting
         term K (g - x); once every iterate meets them, that term is zero and skipped)."""
         g = self._g
         g.set(0.0)
-        compat.set_dirichlet_values(g, self.problem.bcs)
+        compat.set_dirichlet_values(g, self.bcs)
         idx = self._bc_dofs
         local = float(np.max(np.abs(x.array[idx] - g.array[idx]))) if idx.size else 0.0
         scale = float(np.max(np.abs(g.array[idx]))) if idx.size else 0.0
-        comm = self.problem.comm
+        comm = self.comm
         return comm.allreduce(local, op=MPI.MAX) > 1e-13 * max(1.0, comm.allreduce(scale, op=MPI.MAX))
 
     def _jacobian(self, snes, x, J, P):
         with timing.timed("assembly"):
-            compat.assemble_matrix_into(J, self.problem.forms.hessian, self.problem.bcs)
+            compat.assemble_matrix_into(J, self.hessian_form, self.bcs)
 
     def solve(self) -> NewtonResult:
-        """Solve from the current ``problem.w`` as initial guess; ``problem.w`` holds the result."""
-        w_vec = compat.function_vector(self.problem.w)
+        """Solve from the current ``w`` as initial guess; ``w`` holds the result."""
+        w_vec = compat.function_vector(self.w)
         w_vec.copy(self.x)
         self._lifting = self._needs_lifting(self.x)
         if not self._lifting:
-            compat.set_dirichlet_values(self.x, self.problem.bcs)  # exact, not just to round-off
+            compat.set_dirichlet_values(self.x, self.bcs)  # exact, not just to round-off
         try:
             with timing.timed("newton"):
                 self.snes.solve(None, self.x)
@@ -159,9 +167,8 @@ class NewtonSolver:
         self.last_iterations = its
         if its >= 1:
             # every option has been read once the linear solver was set up (MUMPS reads its controls at
-            # the first factorization, field-split its blocks' at the first PCSetUp): free PETSc's
-            # options table (512 entries per process), which many solvers in one process would fill
-            self._clear_options()
+            # the first factorization, field-split its blocks' at the first PCSetUp)
+            self._options.clear()
         self.linear_iterations += self.snes.getLinearSolveIterations()
         if reason > 0:
             self._sync_solution(self.x)
@@ -181,14 +188,7 @@ class NewtonSolver:
         nneg, nzero, npos = F.getInertia()
         return int(nneg), int(nzero), int(npos)
 
-    def _clear_options(self) -> None:
-        opts = PETSc.Options()
-        for key in self._option_keys:
-            if opts.hasName(key):
-                opts.delValue(key)
-        self._option_keys = []
-
     def destroy(self) -> None:
-        self._clear_options()
+        self._options.clear()
         for obj in (self.snes, self.A, self.b, self.x, self._g):
             obj.destroy()

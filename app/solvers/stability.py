@@ -8,7 +8,7 @@ depend on the step sizes the adaptive integrator happened to choose.
 
 - ``inertia()``: the exact counts of negative, zero and positive eigenvalues from an LDL^T
   (MUMPS Cholesky) factorization, Sylvester's law of inertia. One factorization: with the default
-  screening (:class:`app.onset.crossing.CrossingDetector`) most steps read the Newton factor's inertia
+  screening (:class:`app.onset.screening.StabilityScreen`) most steps read the Newton factor's inertia
   instead and this exact test only confirms the bracket of an onset.
 - ``eigenpairs(n)``: the n eigenpairs nearest zero (SLEPc Krylov-Schur, shift-invert, target 0,
   Hermitian), with the eigenvectors embedded back into the full mixed space.
@@ -19,6 +19,7 @@ spurious eigenvalues.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +27,8 @@ from petsc4py import PETSc
 from slepc4py import SLEPc
 
 from app import compat, timing
+from app.model.potential import MaterialFields, build
+from app.solvers import mumps
 
 
 @dataclass
@@ -34,37 +37,77 @@ class Eigenpair:
     vector: np.ndarray  # local array (owned + ghosts) in the mixed space W
 
 
+def zero_increment_hessian(problem, tau: float):
+    """K of the problem's incremental potential on coefficients of its own: (form, work, state, tau).
+
+    ``work`` is the (u, dQ) the Hessian is evaluated at and ``state`` the previous state (u_n, Q_n),
+    both refreshed from the problem's converged state before each assembly; the material fields are
+    copied once and ``tau`` is a Constant of its own. The coefficients are created in the order the
+    problem creates its own (unknown, state, material fields, then the constants tau and mu_bar), so
+    the form has the problem's form signature: the same compiled kernel (JIT cache hit) and a K
+    identical to the one assembled from the problem's own coefficients, bit for bit."""
+    p = problem
+    work, state = compat.Function(p.W), compat.Function(p.W)
+    fields = {}
+    for f in dataclasses.fields(MaterialFields):
+        source = getattr(p.mat, f.name)
+        fields[f.name] = compat.Function(source.function_space)
+        fields[f.name].x.array[:] = source.x.array
+    tau_c = compat.Constant(p.domain, compat.ScalarType(tau))
+    mu_bar = compat.Constant(p.domain, compat.ScalarType(0.0))  # does not enter K (linear in dQ)
+    surface = p.ds_permeable if p.loading.kind == "swelling" else None
+    pot = build(work, state, MaterialFields(**fields), tau_c, mu_bar, p.dx, surface, p.dx_coupling)
+    return compat.form(pot.hessian), work, state, tau_c
+
+
 class StabilityAnalyzer:
-    def __init__(self, problem, tau: float):
-        self.p = problem
+    """Inertia and eigenpairs of K at a state, from a Hessian form on the analyzer's own coefficients.
+
+    Built from that form, the Dirichlet conditions and the state it reads (never writes); use
+    :meth:`for_problem`."""
+
+    def __init__(self, hessian, work, state_copy, tau_const, tau: float, source_state, u_dofs, bcs, comm):
+        self.hessian, self.work, self.state_copy, self.tau_const = hessian, work, state_copy, tau_const
         self.tau = tau
-        self.A = compat.create_matrix(problem.forms.hessian)
+        self.source = source_state  # the converged state the tests are about (read only)
+        self.u_dofs, self.bcs, self.comm = u_dofs, bcs, comm
+        self.W = work.function_space
+        self.A = compat.create_matrix(hessian)
         self.is_free = self._free_index_set()
         self.Kf = None
         self._ksp = None
-        self._full = compat.create_vector(problem.forms.residual)
+        self._ksp_options = None
+        self._full = self.A.createVecRight()
         self.n_free = self.is_free.getSize()
         self.tests = 0  # exact inertia tests (each one LDL^T factorization)
 
+    @classmethod
+    def for_problem(cls, problem, tau: float) -> StabilityAnalyzer:
+        """The analyzer of a problem's converged state (``problem.state``), with step ``tau`` in K."""
+        hessian, work, state_copy, tau_const = zero_increment_hessian(problem, tau)
+        return cls(hessian, work, state_copy, tau_const, tau, problem.state, problem.u_dofs, problem.bcs,
+                   problem.comm)
+
     def _free_index_set(self) -> PETSc.IS:
-        W = self.p.W
-        fixed = np.zeros(compat.owned_size(W), dtype=bool)
-        fixed[compat.owned_bc_dofs(self.p.bcs, W)] = True
-        return compat.owned_index_set(W, np.flatnonzero(~fixed), self.p.comm)
+        fixed = np.zeros(compat.owned_size(self.W), dtype=bool)
+        fixed[compat.owned_bc_dofs(self.bcs, self.W)] = True
+        return compat.owned_index_set(self.W, np.flatnonzero(~fixed), self.comm)
 
     # --- K on the free dofs ----------------------------------------------------------------
 
     def _set_zero_increment(self) -> None:
-        p = self.p
-        w, s = p.w.x.array, p.state.x.array
+        """Own coefficients at the converged state: (u, dQ) = (u_n, 0), tau = stability.tau."""
+        s = self.source.x.array
+        self.state_copy.x.array[:] = s
+        w = self.work.x.array
         w[:] = 0.0
-        w[p.u_dofs] = s[p.u_dofs]
-        p.tau.value = self.tau
+        w[self.u_dofs] = s[self.u_dofs]
+        self.tau_const.value = self.tau
 
     def assemble(self) -> PETSc.Mat:
-        """K at the current converged state (problem.state), restricted to the free dofs."""
+        """K at the current converged state, restricted to the free dofs."""
         self._set_zero_increment()
-        compat.assemble_matrix_into(self.A, self.p.forms.hessian, self.p.bcs)
+        compat.assemble_matrix_into(self.A, self.hessian, self.bcs)
         if self.Kf is None:
             self.Kf = self.A.createSubMatrix(self.is_free, self.is_free)
         else:
@@ -81,20 +124,14 @@ class StabilityAnalyzer:
     def _inertia(self) -> tuple[int, int, int]:
         Kf = self.assemble()
         if self._ksp is None:
-            ksp = PETSc.KSP().create(self.p.comm)
-            ksp.setType("preonly")
-            pc = ksp.getPC()
-            pc.setType("cholesky")
-            pc.setFactorSolverType("mumps")
-            ksp.setOperators(Kf)
-            pc.setFactorSetUpSolverType()
-            F = pc.getFactorMatrix()
-            F.setMumpsIcntl(24, 1)  # detect null pivots
-            F.setMumpsIcntl(13, 1)  # no ScaLAPACK on the root node: exact inertia in parallel
+            self._ksp_options = mumps.PrefixedOptions("hbinertia", mumps.direct("cholesky", mumps.INERTIA))
+            ksp = PETSc.KSP().create(self.comm)
+            ksp.setOptionsPrefix(self._ksp_options.prefix)
+            ksp.setFromOptions()
             self._ksp = ksp
-        else:
-            self._ksp.setOperators(Kf)
+        self._ksp.setOperators(Kf)
         self._ksp.setUp()
+        self._ksp_options.clear()  # read by the first factorization
         nneg, nzero, npos = self._ksp.getPC().getFactorMatrix().getInertia()
         return int(nneg), int(nzero), int(npos)
 
@@ -105,7 +142,7 @@ class StabilityAnalyzer:
 
     def _eigenpairs(self, n: int) -> list[Eigenpair]:
         Kf = self.assemble()
-        eps = SLEPc.EPS().create(self.p.comm)
+        eps = SLEPc.EPS().create(self.comm)
         eps.setOperators(Kf)
         eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
         eps.setType(SLEPc.EPS.Type.KRYLOVSCHUR)
@@ -115,19 +152,14 @@ class StabilityAnalyzer:
         st = eps.getST()
         st.setType(SLEPc.ST.Type.SINVERT)
         st.setShift(0.0)
-        ksp = st.getKSP()
-        ksp.setType("preonly")
-        pc = ksp.getPC()
-        pc.setType("cholesky")
-        pc.setFactorSolverType("mumps")
-        # MUMPS controls can only reach the factor through options before ST sets it up.
-        prefix = f"hbeig{id(self)}_"
-        PETSc.Options()[prefix + "st_mat_mumps_icntl_13"] = 1
-        eps.setOptionsPrefix(prefix)
+        # the shift-invert's LDL^T: MUMPS controls reach a factor that ST sets up only through options;
+        # ICNTL(13) for a parallel factorization like the inertia test's (no null-pivot detection here)
+        options = mumps.PrefixedOptions("hbeig", mumps.direct("cholesky", {13: 1}, scope="st_"))
+        eps.setOptionsPrefix(options.prefix)
         eps.setFromOptions()
         eps.setTolerances(1e-10, 500)
         eps.solve()
-        PETSc.Options().delValue(prefix + "st_mat_mumps_icntl_13")
+        options.clear()
         pairs = []
         xr = Kf.createVecRight()
         for i in range(min(eps.getConverged(), n)):
@@ -161,13 +193,15 @@ class StabilityAnalyzer:
         sub = full.getSubVector(self.is_free)
         x_free.copy(sub)
         full.restoreSubVector(self.is_free, sub)
-        f = compat.Function(self.p.W)
-        n = compat.owned_size(self.p.W)
+        f = compat.Function(self.W)
+        n = compat.owned_size(self.W)
         f.x.array[:n] = full.array
         f.x.scatter_forward()
         return f.x.array.copy()
 
     def destroy(self) -> None:
+        if self._ksp_options is not None:
+            self._ksp_options.clear()
         for obj in (self._ksp, self.Kf, self.A, self.is_free, self._full):
             if obj is not None:
                 obj.destroy()

@@ -7,16 +7,14 @@ and that predictor estimates the local truncation error,
     err ~ dt / (2 dt + dt_prev) * max_cells |s - s_pred|,
 
 measured on the cell-averaged fluid content s, the quantity whose through-thickness profile in
-the film decides the onset of wrinkling. A step with err > tolerance is rejected and retried
-smaller; an accepted step proposes dt_next = dt * clamp(0.9 sqrt(tol/err), 0.2, 2). Steps never
+the film decides the onset of wrinkling. What a step size becomes after an acceptance, a rejection
+or a Newton divergence is :class:`app.solvers.step_control.StepControl`'s arithmetic. Steps never
 cross a kink of the loading (the end of the ramp); after a kink, whose rate jump the predictor
-cannot know, the history restarts. A step whose Newton iteration diverges is cut back by 4 until
-``time.dt_min``, below which the run fails with a :class:`StepFailure`.
+cannot know, the history restarts. Below ``time.dt_min`` the run fails with a :class:`StepFailure`.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,12 +22,30 @@ import ufl
 from mpi4py import MPI
 
 from app import compat
-from app.solvers.newton import NewtonSolver
+from app.solvers.newton import NewtonSolver, SolverSettings
+from app.solvers.step_control import StepControl
 
-CUTBACK = 0.25
-SAFETY = 0.9
-GROW_MAX = 2.0
-SHRINK_MIN = 0.2
+
+@dataclass(frozen=True)
+class TimeSettings:
+    """The [time] table: end time, step-size limits and control."""
+
+    end: float
+    dt_initial: float
+    dt_min: float
+    dt_max: float
+    tolerance: float
+    adaptive: bool = True
+    max_steps: int = 100000
+
+    @classmethod
+    def from_config(cls, cfg: dict) -> TimeSettings:
+        t = cfg["time"]
+        return cls(t["end"], t["dt_initial"], t["dt_min"], t["dt_max"], t["tolerance"], t["adaptive"],
+                   t["max_steps"])
+
+    def step_control(self) -> StepControl:
+        return StepControl(self.tolerance, self.dt_min, self.dt_max, self.adaptive, self.dt_initial)
 
 
 class StepFailure(RuntimeError):
@@ -72,29 +88,25 @@ class Snapshot:
 class TimeStepper:
     """Advances a :class:`app.model.problem.Problem` in time."""
 
-    def __init__(self, problem, cfg: dict, log=None):
+    def __init__(self, problem, time: TimeSettings, solver: SolverSettings, log=None):
         self.p = problem
-        tcfg, scfg = cfg["time"], cfg["solver"]
-        self.end = tcfg["end"]
-        self.dt_min, self.dt_max = tcfg["dt_min"], tcfg["dt_max"]
-        self.tol, self.adaptive = tcfg["tolerance"], tcfg["adaptive"]
-        self.dt_fixed = tcfg["dt_initial"]
-        self.max_steps = tcfg["max_steps"]
-        self.solver = NewtonSolver(problem, scfg["rtol"], scfg["atol"], scfg["max_it"],
-                                   factorization=scfg["factorization"], linear=scfg["linear"],
-                                   ksp_rtol=scfg["ksp_rtol"], ksp_max_it=scfg["ksp_max_it"])
+        self.end = time.end
+        self.max_steps = time.max_steps
+        self.control = time.step_control()
+        self.solver = NewtonSolver(problem.forms.residual, problem.forms.hessian, problem.bcs, problem.w, solver,
+                                   problem.comm, fields={"u": problem.u_dofs, "q": problem.q_dofs})
         self.log = log or (lambda msg: None)
         self.kinks = sorted(k for k in problem.loading.kinks() if 0 < k < self.end)
 
         nu, nq = len(problem.u_dofs), len(problem.q_dofs)
         self.rate_u = np.zeros(nu)
         self.dQ_prev = np.zeros(nq)
-        self.dt_prev = tcfg["dt_initial"]
+        self.dt_prev = time.dt_initial
         self.history_valid = False
         self.t = 0.0
         self.step = 0
         self.inflow = 0.0
-        self.dt_next = tcfg["dt_initial"]
+        self.dt_next = time.dt_initial
         self.rejected = 0
         self.failed_solves = 0
         self._setup_error_form()
@@ -176,25 +188,25 @@ class TimeStepper:
         at the latest."""
         if self.step >= self.max_steps:
             raise StepFailure(f"time.max_steps = {self.max_steps} reached at t = {self.t:.6g} s")
-        dt = self.dt_next if self.adaptive else self.dt_fixed
-        dt = min(dt, self.dt_max)
+        control = self.control
+        dt = control.first_try(self.dt_next)
         while True:
             dt = self._clip(dt, until)
             res, err = self.attempt(dt)
             if not res.converged:
                 self.failed_solves += 1
-                new_dt = dt * CUTBACK
+                new_dt = control.cut_back(dt)
                 self.log(f"  Newton did not converge (reason {res.reason}) at t = {self.t + dt:.6g} s, "
                          f"dt = {dt:.3g} s: cutting back to {new_dt:.3g} s")
-                if new_dt < self.dt_min:
+                if new_dt < control.dt_min:
                     raise StepFailure(f"Newton failed to converge at t = {self.t:.6g} s even with "
-                                      f"dt = {dt:.3g} s (time.dt_min = {self.dt_min:g} s); "
+                                      f"dt = {dt:.3g} s (time.dt_min = {control.dt_min:g} s); "
                                       f"last SNES reason {res.reason}")
                 dt = new_dt
                 continue
-            if self.adaptive and math.isfinite(err) and err > self.tol and dt > self.dt_min:
+            if control.rejects(dt, err):
                 self.rejected += 1
-                dt = max(dt * max(SHRINK_MIN, SAFETY * math.sqrt(self.tol / err)), self.dt_min)
+                dt = control.shrink(dt, err)
                 continue
             break
         return self._accept(dt, res.iterations, err)
@@ -212,14 +224,8 @@ class TimeStepper:
         self.inflow += influx
         crossed_kink = any(abs(self.t - k) <= 1e-12 * max(1.0, k) for k in self.kinks)
         self.history_valid = not crossed_kink
-        if self.adaptive:
-            if math.isfinite(err) and err > 0:
-                factor = min(GROW_MAX, max(SHRINK_MIN, SAFETY * math.sqrt(self.tol / err)))
-            elif math.isfinite(err):
-                factor = GROW_MAX
-            else:
-                factor = 1.0  # no estimate yet (first step, or just after a kink)
-            self.dt_next = min(self.dt_max, max(self.dt_min, dt * factor))
+        if self.control.adaptive:
+            self.dt_next = self.control.proposal(dt, err)
         return self.record(dt, its, err)
 
     def record(self, dt: float, its: int, err: float) -> StepRecord:
@@ -232,3 +238,24 @@ class TimeStepper:
 
     def done(self) -> bool:
         return self.t >= self.end - 1e-12 * max(1.0, self.end)
+
+    # --- what the onset tracker needs ------------------------------------------------------
+
+    def advance_to(self, t: float) -> int:
+        """Step from the current state to time t exactly (re-solving a bracket); returns the steps taken."""
+        steps = 0
+        while self.t < t - 1e-14 * t:
+            self.advance(until=t)
+            steps += 1
+        return steps
+
+    def factor_inertia(self) -> tuple[int, int, int] | None:
+        """Inertia of the last Newton factor (see :meth:`NewtonSolver.factor_inertia`)."""
+        return self.solver.factor_inertia()
+
+    @property
+    def linear_iterations(self) -> int:
+        return self.solver.linear_iterations
+
+    def destroy(self) -> None:
+        self.solver.destroy()

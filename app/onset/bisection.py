@@ -1,0 +1,76 @@
+"""Locating one stability crossing in time: bisection between a stable and an unstable state.
+
+The bracket (the last exactly stable and the first unstable accepted state, from
+:class:`app.onset.screening.StabilityScreen`) is halved by re-solving from the stable end to the
+midpoint (with the same error-controlled stepping) until its width is below ``tolerance`` relative
+to the crossing time. At the two final ends SLEPc gives lambda_min; the critical time and growth are
+linear interpolations in lambda_min between them, and the eigenvector of the crossing eigenvalue at
+the unstable end is the buckling mode. The wrinkle count N_c is the vertex of lambda(N) over the
+eigenpairs nearest zero there (:func:`app.onset.wrinkles.band_vertex`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.onset.crossing import Crossing
+from app.onset.wrinkles import band_vertex, mode_wrinkle_count
+
+BAND_MODES = 8  # eigenpairs sampled at the unstable end to locate the minimum of lambda(N)
+
+
+class Bisection:
+    """Bisects crossing brackets of ``problem`` advanced by ``stepper``, tested by ``analyzer``.
+
+    The problem is only read (growth, loading, state, wrinkle counts); the stepper is moved with
+    ``restore``/``advance_to`` and left at the unstable end."""
+
+    def __init__(self, problem, stepper, analyzer, *, tolerance: float, n_modes: int, log=None):
+        self.problem, self.stepper, self.analyzer = problem, stepper, analyzer
+        self.tolerance, self.n_modes = tolerance, n_modes
+        self.log = log or (lambda msg: None)
+
+    def locate(self, stable, unstable, *, base_count: int) -> Crossing:
+        """The crossing of eigenvalue number ``base_count`` (0-based) between two snapshots."""
+        stepper, analyzer = self.stepper, self.analyzer
+        lo, hi = stable, unstable
+        solves = 0
+        while hi.t - lo.t > self.tolerance * hi.t:
+            stepper.restore(lo)
+            solves += stepper.advance_to(0.5 * (lo.t + hi.t))
+            if analyzer.inertia()[0] > base_count:
+                hi = stepper.snapshot()
+            else:
+                lo = stepper.snapshot()
+            self.log(f"  bisection: bracket [{lo.t:.6f}, {hi.t:.6f}] s")
+        return self._crossing(lo, hi, base_count, solves)
+
+    def _end(self, snap, n: int):
+        self.stepper.restore(snap)
+        return self.problem.growth(), self.analyzer.eigenpairs(n)
+
+    def _crossing(self, lo, hi, base_count: int, solves: int) -> Crossing:
+        p, n_modes = self.problem, self.n_modes
+        g_lo, pairs_lo = self._end(lo, base_count + 1)
+        g_hi, pairs_hi = self._end(hi, max(n_modes, base_count + BAND_MODES))
+        hi_count = self.analyzer.inertia()[0]
+        lam_lo = pairs_lo[base_count].value if len(pairs_lo) > base_count else float("nan")
+        lam_hi = pairs_hi[base_count].value if len(pairs_hi) > base_count else float("nan")
+        if np.isfinite(lam_lo) and np.isfinite(lam_hi) and lam_lo > 0 > lam_hi:
+            frac = lam_lo / (lam_lo - lam_hi)
+        else:
+            frac = 0.5
+        t_c = lo.t + frac * (hi.t - lo.t)
+        g_c = g_lo + frac * (g_hi - g_lo)
+        mode_pair = pairs_hi[min(base_count, len(pairs_hi) - 1)]
+        counts = [mode_wrinkle_count(p, e.vector) for e in pairs_hi]
+        modes = [{"eigenvalue": e.value, "wrinkle_count": n} for e, n in zip(pairs_hi, counts)][:n_modes]
+        first = counts[min(base_count, len(counts) - 1)]
+        step = 1.0 if p.geo.wrinkles == "around" else 0.5
+        vertex = band_vertex(counts[base_count:], [e.value for e in pairs_hi[base_count:]], step=step)
+        return Crossing(
+            time=t_c, growth_mm=g_c, applied_strain=p.loading.applied_strain(t_c), mu_bar=p.loading.mu_bar(t_c),
+            wrinkle_count=vertex if vertex is not None else first, first_mode_wrinkle_count=first,
+            lambda_min_before=lam_lo, lambda_min_after=lam_hi, bracket=(lo.t, hi.t),
+            negative_eigenvalues=base_count + 1, modes=modes, bisection_solves=solves, mode=mode_pair.vector,
+            state=p.state.x.array.copy(), lo=lo, hi=hi, hi_count=hi_count)

@@ -1,0 +1,101 @@
+"""The per-step stability verdict, and a verified bracket when a new negative eigenvalue appears.
+
+``screening = "exact"``: the inertia of K (converged state, zero increment, ``stability.tau``)
+after every step, one LDL^T factorization each.
+
+``screening = "newton"``: every step reads the inertia of the Newton solver's last LDL^T factor,
+which that step computed anyway (K one Newton update short of the converged state, with the
+step's own tau): the stability test costs no factorization. It is a screen only: an increase is
+confirmed by the exact test at that step (a false alarm is logged and the run goes on), and the
+stable end of the bracket is verified by exact tests, walking back through the last ``keep``
+accepted states and, past them, to the last state verified exactly. The bracket that the
+bisection refines is therefore the same as with exact tests on every step, up to a screen that
+reports late (then the bracket is wider, never wrong).
+Steps without a factorization of their own (zero Newton iterations, or ``solver.factorization =
+"lu"``) are tested exactly.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+
+class StabilityScreen:
+    """Negative-eigenvalue counts of accepted states and the brackets of their increases.
+
+    Needs from the stepper only ``snapshot``, ``restore`` and ``factor_inertia``; from the analyzer
+    only ``inertia``."""
+
+    def __init__(self, stepper, analyzer, screening: str = "newton", keep: int = 4, log=None):
+        self.stepper, self.analyzer, self.screening = stepper, analyzer, screening
+        self.recent: deque = deque(maxlen=keep)  # accepted states before the current one
+        self.verified = None  # the last state the exact test found with no new negative eigenvalue
+        self.screened_steps = 0
+        self._last_exact = True
+        self.false_alarms = 0
+        self.late_screens = 0  # states the walk-back found already unstable (the screen reported late)
+        self.log = log or (lambda msg: None)
+
+    def _exact(self) -> int:
+        self._last_exact = True
+        return self.analyzer.inertia()[0]
+
+    def start(self) -> int:
+        """Exact negative-eigenvalue count of the initial state."""
+        count = self._exact()
+        self.verified = self.stepper.snapshot()
+        self.recent.append(self.verified)
+        return count
+
+    def screen(self) -> int:
+        """Negative-eigenvalue count of the state just accepted (screened or exact)."""
+        if self.screening == "newton":
+            inertia = self.stepper.factor_inertia()
+            if inertia is not None:
+                self.screened_steps += 1
+                self._last_exact = False
+                return inertia[0]
+        return self._exact()
+
+    def confirm(self, count: int, screened: int):
+        """Exact check of a screened increase over ``count`` at the current state.
+
+        Returns None for a false alarm, else (exact count, stable snapshot, unstable snapshot);
+        the stepper is left at the current (unstable) state."""
+        hi = self.stepper.snapshot()
+        nneg = screened if self._last_exact else self._exact()
+        if nneg <= count:
+            self.false_alarms += 1
+            self.log(f"  screened inertia reported {screened} negative eigenvalue(s); the exact test finds "
+                     f"{nneg}: no crossing yet")
+            self.verified = hi
+            return None
+        if self.screening != "newton":
+            return nneg, self.recent[-1], hi  # the previous state passed the exact test
+        lo = None
+        for snap in reversed(self.recent):
+            if snap is self.verified:
+                lo = snap
+                break
+            self.stepper.restore(snap)
+            if self._exact() <= count:
+                lo = snap
+                break
+            self.late_screens += 1
+            self.log(f"  the state at t = {snap.t:.6f} s is already unstable: widening the bracket")
+        if lo is None:
+            lo = self.verified
+            self.log(f"  the bracket's stable end moved back to the last verified state, t = {lo.t:.6f} s")
+        self.verified = lo
+        self.stepper.restore(hi)
+        return nneg, lo, hi
+
+    def accepted(self, snap) -> None:
+        """Remember an accepted state (a candidate stable end of a later bracket)."""
+        self.recent.append(snap)
+
+    def restart(self, snap) -> None:
+        """After the crossings at ``snap`` are located: its exact count is the new reference."""
+        self.recent.clear()
+        self.recent.append(snap)
+        self.verified = snap

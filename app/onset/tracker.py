@@ -1,0 +1,165 @@
+"""The onset tracker: everything the [stability] table asks of a run, behind one object.
+
+After every accepted step the run asks the tracker twice: :meth:`OnsetTracker.test` gives the step's
+verdict (the screened or exact negative-eigenvalue count, an increase confirmed exactly, lambda_min
+every ``eigen_every`` steps) and records it with the step; :meth:`OnsetTracker.resolve` then locates
+every new crossing by bisection, records it, hands the first one's mode to the writer, and applies
+the :class:`~app.onset.policy.CrossingPolicy`, whose answer ends the run or not. The tracker leaves the
+stepper at the state the run continues from. With ``stability.enabled = false`` the run gets an
+:class:`Untracked` that does none of this.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from app.onset.bisection import Bisection
+from app.onset.policy import AfterCrossing, CrossingPolicy
+from app.onset.screening import StabilityScreen
+from app.solvers.stability import StabilityAnalyzer
+
+
+@dataclass(frozen=True)
+class StabilitySettings:
+    """The [stability] table."""
+
+    enabled: bool = True
+    tolerance: float = 1e-3  # relative width of a crossing's time bracket
+    policy: CrossingPolicy = CrossingPolicy()
+    modes: int = 3  # eigenpairs reported at a crossing
+    eigen_every: int = 0  # lambda_min every n steps (0: only at crossings)
+    tau: float = 1e-2  # step in the dissipation block of the tested K
+    screening: str = "newton"
+    error_estimate: bool = False  # companion runs after the run (app.workflows.error_estimate)
+
+    @classmethod
+    def from_config(cls, cfg: dict) -> StabilitySettings:
+        s = cfg["stability"]
+        return cls(s["enabled"], s["tolerance"], CrossingPolicy.from_flags(s["stop_at_onset"], s["max_crossings"]),
+                   s["modes"], s["eigen_every"], s["tau"], s["screening"], s["error_estimate"])
+
+
+def onset_tracker(problem, stepper, settings: StabilitySettings, on_first_crossing=None, log=None, detail=None):
+    """The tracker a run with these settings needs (:class:`Untracked` when the test is off)."""
+    if not settings.enabled:
+        return Untracked()
+    return OnsetTracker(problem, stepper, settings, on_first_crossing, log, detail)
+
+
+class OnsetTracker:
+    """Stability verdicts and crossings of one run. ``log`` gets the crossing messages, ``detail`` the
+    screening and bisection steps (progress lines)."""
+
+    COLUMNS = ("negative_eigenvalues", "lambda_min")  # added to history.csv
+
+    def __init__(self, problem, stepper, settings: StabilitySettings, on_first_crossing=None, log=None,
+                 detail=None):
+        self.settings, self.stepper = settings, stepper
+        self.log = log or (lambda msg: None)
+        detail = detail or (lambda msg: None)
+        self.analyzer = StabilityAnalyzer.for_problem(problem, settings.tau)
+        self.screen = StabilityScreen(stepper, self.analyzer, settings.screening, log=detail)
+        self.bisection = Bisection(problem, stepper, self.analyzer, tolerance=settings.tolerance,
+                                   n_modes=settings.modes, log=detail)
+        self.on_first_crossing = on_first_crossing or (lambda crossing: None)
+        self.count = 0  # negative eigenvalues on the path so far
+        self.crossings: list = []
+        self._bracket = None
+
+    def start(self, rec) -> None:
+        """The initial state's exact count, recorded with it."""
+        self.count = self.screen.start()
+        rec.extra.update({"negative_eigenvalues": self.count, "lambda_min": float("nan")})
+
+    def test(self, rec) -> None:
+        """The verdict on the step just accepted, recorded in ``rec``; a confirmed increase is kept
+        for :meth:`resolve`."""
+        nneg = self.screen.screen()
+        self._bracket = None
+        if nneg > self.count:
+            self._bracket = self.screen.confirm(self.count, nneg)
+            nneg = self._bracket[0] if self._bracket is not None else self.count
+        lam = float("nan")
+        every = self.settings.eigen_every
+        if every and rec.step % every == 0:
+            lam = self.analyzer.lambda_min(nneg)
+        rec.extra.update({"negative_eigenvalues": nneg, "lambda_min": lam})
+
+    def resolve(self) -> bool:
+        """Locate the crossings the last test found, one bisection per new negative eigenvalue;
+        True when the policy ends the run."""
+        if self._bracket is None:
+            self.screen.accepted(self.stepper.snapshot())
+            return False
+        nneg, lo, unstable = self._bracket
+        self._bracket = None
+        self.log(f"  K lost positive definiteness between t = {lo.t:.6f} and {unstable.t:.6f} s "
+                 f"({nneg - self.count} new negative eigenvalue(s))")
+        stop = False
+        while self.count < nneg:
+            crossing = self.bisection.locate(lo, unstable, base_count=self.count)
+            self.crossings.append(crossing)
+            self.log(f"  crossing #{len(self.crossings)}: t = {crossing.time:.6f} s, "
+                     f"growth = {1e3 * crossing.growth_mm:.4f} um, N = {crossing.wrinkle_count:g}")
+            if len(self.crossings) == 1:
+                self.on_first_crossing(crossing)
+            self.count += 1
+            lo = crossing.hi if crossing.hi_count == self.count else crossing.lo
+            stop = self.settings.policy.stops(len(self.crossings))
+            if stop:
+                break
+        self.count = max(self.count, nneg)
+        self.stepper.restore(unstable)
+        if not stop:
+            self.screen.restart(unstable)
+        return stop
+
+    # --- the summary's stability entries -----------------------------------------------------
+
+    def status(self, status: str) -> str:
+        """A run that did not fail is "buckled" or "stable"."""
+        return status if status == "failed" else ("buckled" if self.crossings else "stable")
+
+    def onset_summary(self) -> dict:
+        c = self.crossings
+        out = {"critical": c[0].as_dict()} if c else {}
+        if len(c) > 1 or (c and self.settings.policy.after is not AfterCrossing.STOP):
+            out["crossings"] = [x.as_dict() for x in c]
+        return out
+
+    def tests_summary(self) -> dict:
+        s = self.screen
+        return {"stability_tests": {"screening": self.settings.screening, "screened_steps": s.screened_steps,
+                                    "exact_tests": self.analyzer.tests, "false_alarms": s.false_alarms,
+                                    "late_screens": s.late_screens}}
+
+    def destroy(self) -> None:
+        self.analyzer.destroy()
+
+
+class Untracked:
+    """``stability.enabled = false``: no test, no history columns, nothing in the summary."""
+
+    COLUMNS = ()
+    crossings = ()
+
+    def start(self, rec) -> None:
+        pass
+
+    def test(self, rec) -> None:
+        pass
+
+    def resolve(self) -> bool:
+        return False
+
+    def status(self, status: str) -> str:
+        return status
+
+    def onset_summary(self) -> dict:
+        return {}
+
+    def tests_summary(self) -> dict:
+        return {}
+
+    def destroy(self) -> None:
+        pass

@@ -1,0 +1,36 @@
+"""Solvers own their work data: the stability analyzer tests the problem's converged state on
+coefficients of its own (it never writes the problem's unknown or step size), and its K is the one
+assembled from the problem's own forms at zero increment, bit for bit (the same compiled kernel)."""
+
+import numpy as np
+from conftest import run_to_end, small_bilayer
+
+from app import compat
+from app.solvers.stability import StabilityAnalyzer
+
+
+def test_analyzer_k_is_the_problems_k_and_leaves_the_problem_alone(comm):
+    cfg = small_bilayer(**{"time.end": 0.05, "stability.enabled": "false"})
+    p, _, _ = run_to_end(cfg, comm)  # a state with displacement and fluid
+    tau = 0.01
+    analyzer = StabilityAnalyzer.for_problem(p, tau)
+    # the coefficients are the analyzer's own, the compiled kernel the problem's (no second JIT compile)
+    assert compat.form_signature(analyzer.hessian) == compat.form_signature(p.forms.hessian)
+    w, step_tau = p.w.x.array.copy(), float(p.tau.value)
+    assert step_tau != tau
+    nneg = analyzer.inertia()[0]
+    analyzer.eigenpairs(2)
+    assert np.array_equal(p.w.x.array, w) and float(p.tau.value) == step_tau
+    assert nneg == 0
+
+    # the reference: the problem's own Hessian form at zero increment with the stability tau
+    p.w.x.array[:] = 0.0
+    p.w.x.array[p.u_dofs] = p.state.x.array[p.u_dofs]
+    p.tau.value = tau
+    A = compat.create_matrix(p.forms.hessian)
+    compat.assemble_matrix_into(A, p.forms.hessian, p.bcs)
+    analyzer.assemble()
+    A.axpy(-1.0, analyzer.A)
+    assert A.norm() == 0.0
+    A.destroy()
+    analyzer.destroy()
