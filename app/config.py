@@ -19,15 +19,6 @@ from app.schema import key as _key, one_of as _one_of, unset
 
 LOADING_KINDS = ("swelling", "compression")
 
-MATERIAL_KEYS = {
-    "shear_modulus": _key(float, 0.1, _gt(0), "gamma [MPa]; not given in the paper: an assumption"),
-    "mixing_modulus": _key(float, 24.2, _gt(0), "alpha [MPa]"),
-    "penalty": _key(float, 10.0, _gt(0), "epsilon [MPa]"),
-    "mobility": _key(float, 1.0e-4, _gt(0), "M [mm^4/(N s)]"),
-    "preswelling": _key(float, 1.01, _in_open(1.0, 100.0), "J0 [-], > 1"),
-    "interaction": _key(float, 0.1, _in_closed(-1.0, 2.0), "chi [-]"),
-}
-
 _STATIC: dict[str, dict[str, Key] | dict] = {
     "geometry": {},  # built from the registered geometry kinds: see _geometry_table
     "mesh": {
@@ -42,15 +33,7 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
                                            "quadrature degree of the volumetric penalty term (0/1 = one point: "
                                            "selective reduced integration)"),
     },
-    "material": {
-        **MATERIAL_KEYS,
-        "layers": _key(dict, None, None, "msh: more named layer materials, each like [material.film]",
-                       optional=True),
-        "film": {
-            "modulus_ratio": _key(float, 8.0, _gt(0), "gamma_f/gamma_s", optional=True),
-            **{k: Key(v.type, None, v.check, v.allowed, v.doc, True) for k, v in MATERIAL_KEYS.items()},
-        },
-    },
+    "material": {},  # built from the registered material laws: see _material_table
     "loading": {
         "kind": _key(str, "swelling", _one_of(*LOADING_KINDS)),
         "chemical_potential": _key(float, 0.0, _in_closed(-1000.0, 0.0), "mu_bar after the ramp [MPa]"),
@@ -99,9 +82,10 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
 
 
 def schema() -> dict:
-    """The whole schema: the static tables above, with the geometry table built from the registered
-    geometry kinds (so a kind registered later, e.g. by a test, is part of it at once)."""
-    return {**_STATIC, "geometry": _geometry_table()}
+    """The whole schema: the static tables above, with the geometry and material tables built from the
+    registered geometry kinds and material laws (so one registered later, e.g. by a test, is part of it
+    at once)."""
+    return {**_STATIC, "geometry": _geometry_table(), "material": _material_table()}
 
 
 def _kinds():
@@ -127,15 +111,58 @@ def _geometry_table() -> dict:
     return table
 
 
+def _laws():
+    from app.model import material
+
+    return material.LAWS
+
+
+def law(cfg: dict):
+    """The material law of a resolved config."""
+    return _laws().get(cfg["material"]["law"])
+
+
+def material_keys() -> dict[str, Key]:
+    """The parameters of every registered law, each declared once by its law (a name two laws share
+    is the first one's)."""
+    keys: dict[str, Key] = {}
+    for lw in _laws():
+        for name, spec in lw.params.items():
+            if name in keys and keys[name].type is not spec.type:
+                raise ValueError(f"material.{name}: laws declare it with different types")
+            keys.setdefault(name, spec)
+    return keys
+
+
+def _material_table() -> dict:
+    from app import model
+
+    params = material_keys()
+    return {
+        "law": _key(str, model.DEFAULT_LAW, _one_of(*_laws().names()), "the material law of every layer"),
+        **params,
+        "layers": _key(dict, None, None, "msh: more named layer materials, each like [material.film]",
+                       optional=True),
+        "film": {
+            "modulus_ratio": _key(float, 8.0, _gt(0), "gamma_f/gamma_s: the film's stiffness over the substrate's",
+                                  optional=True),
+            **{k: unset(v) for k, v in params.items()},
+        },
+    }
+
+
 def kind_defaults() -> dict:
     """kind -> {"geometry": its keys' defaults, "mesh": its mesh-key defaults}."""
     return {k.name: {"geometry": k.defaults(), "mesh": dict(k.mesh_defaults)} for k in _kinds()}
 
 
 def __getattr__(name: str):
-    """Names computed from the registries: SCHEMA, GEOMETRY_KINDS, KIND_DEFAULTS, KIND_GEOMETRY_KEYS."""
+    """Names computed from the registries: SCHEMA, GEOMETRY_KINDS, KIND_DEFAULTS, KIND_GEOMETRY_KEYS,
+    MATERIAL_KEYS."""
     if name == "SCHEMA":
         return schema()
+    if name == "MATERIAL_KEYS":
+        return material_keys()
     if name == "GEOMETRY_KINDS":
         return _kinds().names()
     if name == "KIND_DEFAULTS":
@@ -306,9 +333,10 @@ def validate(cfg: dict) -> None:
     kind = _validate_geometry(cfg, sch["geometry"])
     _validate_tree(cfg, {k: v for k, v in sch.items() if k != "geometry"}, "")
     time, film = cfg["time"], cfg["material"]["film"]
-    if film.get("shear_modulus") is not None and film.get("modulus_ratio") is not None:
-        raise ConfigError("material.film.shear_modulus",
-                          "set either material.film.shear_modulus or material.film.modulus_ratio, not both "
+    stiffness = law(cfg).stiffness
+    if film.get(stiffness) is not None and film.get("modulus_ratio") is not None:
+        raise ConfigError(f"material.film.{stiffness}",
+                          f"set either material.film.{stiffness} or material.film.modulus_ratio, not both "
                           "(use --set material.film.modulus_ratio=... alone, or remove it from the file)")
     kind.validate(cfg)
     if kind.named_materials:
@@ -362,14 +390,14 @@ def layer_parameters(cfg: dict, name: str) -> dict:
 
 
 def _with_overrides(cfg: dict, table: dict) -> dict:
-    mat = cfg["material"]
-    out = {k: mat[k] for k in MATERIAL_KEYS}
-    for k in MATERIAL_KEYS:
+    mat, lw = cfg["material"], law(cfg)
+    out = {k: mat[k] for k in lw.params}
+    for k in lw.params:
         if table.get(k) is not None:
             out[k] = table[k]
-    if table.get("shear_modulus") is None:
+    if table.get(lw.stiffness) is None:
         ratio = table.get("modulus_ratio")
-        out["shear_modulus"] = mat["shear_modulus"] * (1.0 if ratio is None else ratio)
+        out[lw.stiffness] = mat[lw.stiffness] * (1.0 if ratio is None else ratio)
     return out
 
 
@@ -380,7 +408,7 @@ def film_overrides(cfg: dict) -> dict:
 
 def substrate_parameters(cfg: dict) -> dict:
     mat = cfg["material"]
-    return {k: mat[k] for k in MATERIAL_KEYS}
+    return {k: mat[k] for k in law(cfg).params}
 
 
 # --- TOML writing (tomllib reads only) -------------------------------------------------------

@@ -6,7 +6,7 @@ import pytest
 from conftest import run_to_end
 
 from app import config
-from app.model.material import constrained_layer_stretch
+from app.model.theory import constrained_layer_stretch
 
 
 def test_quasi_static_swelling_follows_equilibrium_at_step_end(comm):

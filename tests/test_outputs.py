@@ -17,7 +17,7 @@ import pytest
 from mpi4py import MPI
 
 from app import config
-from app.model.material import Hydrogel
+from app.model.hydrogel import Hydrogel
 from app.io.output import RESULT_FILES, OutputSettings, ResultWriter
 from app.workflows.run import simulate
 from app.model.theory import film_wrinkling_strain, film_wrinkling_wavelength, plane_strain_modulus

@@ -222,8 +222,9 @@ def field_expressions(problem):
     """(name, space, UFL expression) of every field in :data:`FIELDS`, from the converged state.
 
     After a step is accepted, problem.state holds (u, Q) and problem.w the step's (u, dQ). The stress
-    is the Cauchy stress sigma = P F^T / det F with P = dpsi/dF by UFL differentiation."""
-    from app.model.material import free_energy
+    is the Cauchy stress sigma = P F^T / det F and the chemical potential mu = dpsi/ds, both by UFL
+    differentiation of the material law's psi."""
+    from app.model.material import first_piola
 
     domain = problem.domain
     Vu = compat.vector_space(domain, "Lagrange", 1)
@@ -235,10 +236,10 @@ def field_expressions(problem):
     F = ufl.variable(ufl.Identity(2) + ufl.grad(u))
     s = mat.s0 - ufl.div(Q)
     J = ufl.det(F)
-    sigma = ufl.diff(free_energy(mat, F, s), F) * F.T / J
+    sigma = first_piola(mat, F, s) * F.T / J
     mean = 0.5 * (sigma[0, 0] + sigma[1, 1])
     radius = ufl.sqrt((0.5 * (sigma[0, 0] - sigma[1, 1])) ** 2 + sigma[0, 1] ** 2)
-    exprs = {"displacement": (Vu, u), "fluid_content": (V0, s), "chemical_potential": (V0, chemical_potential(mat, J, s)),
+    exprs = {"displacement": (Vu, u), "fluid_content": (V0, s), "chemical_potential": (V0, chemical_potential(mat, F, s)),
              "J": (V0, J), "flux": (V0v, dQ / problem.tau), "stress_xx": (V0, sigma[0, 0]),
              "stress_yy": (V0, sigma[1, 1]), "stress_xy": (V0, sigma[0, 1]), "stress_min_principal": (V0, mean - radius)}
     return [(name, *exprs[name]) for name, _ in FIELDS]

@@ -1,120 +1,172 @@
-"""Hydrogel constitutive model of the seed paper (eqs. 3.1-3.6), as plain UFL functions.
+"""The material law interface: what a constitutive model must supply, and everything derived from it.
 
-Free energy per unit preswollen reference volume (neo-Hookean network, Flory-Rehner mixing,
-penalized molecular incompressibility J J0 = 1 + s), and the quadratic dissipation potential of
-Fickian diffusion. Plane strain: ``F`` is the 2x2 in-plane deformation gradient and the
-out-of-plane stretch is 1, so F:F(3D) = F:F(2D) + 1 and J = det F(2D). The preswelling
-F0 = J0^(1/3) 1 is three-dimensional and isotropic.
+A law (:class:`MaterialLaw`) supplies only the physics: its free energy psi(F, s; p) per unit preswollen
+reference volume, its dissipation potential, its parameters declared once (name -> :class:`app.schema.Key`
+with default, range, doc and unit) and its stress-free reference state s0. Everything else is derived
+here, the same way for every law:
 
-Nothing here knows about meshes: the same functions give UFL expressions (for forms) and
-floats (for the reference values in tests and the analytic solutions).
+- mu = dpsi/ds and the first Piola stress P = dpsi/dF by UFL differentiation (``ufl.diff``), as UFL
+  expressions for forms and fields, and as floats (the same UFL expressions evaluated, see
+  :class:`_FloatEvaluator`) for reference values such as mu0;
+- the per-layer parameter record (:class:`Material`, e.g. ``Hydrogel``) with s0 and mu0, whose fields are
+  the declared parameters, as are config's material keys and the per-cell parameter fields of the forms.
+
+Plane strain: ``F`` is the 2x2 in-plane deformation gradient and the out-of-plane stretch is 1. ``p``
+holds the parameters as attributes: floats (a :class:`Material`) or per-cell UFL coefficients.
+A new law is one module with a :class:`MaterialLaw` subclass and one registration in
+``app/model/__init__.py``.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass
+import dataclasses
+from dataclasses import dataclass
+from types import SimpleNamespace
+from typing import ClassVar
 
+import numpy as np
 import ufl
+from ufl.algorithms import expand_derivatives
+from ufl.algorithms.apply_algebra_lowering import apply_algebra_lowering
+
+from app.registry import Registry
+from app.schema import Key
+
+IDENTITY = ((1.0, 0.0), (0.0, 1.0))
+
+
+class MaterialLaw:
+    """A constitutive model: subclass, fill in the class attributes and the three methods, register an
+    instance in :data:`LAWS` (``app/model/__init__.py``)."""
+
+    name: ClassVar[str] = ""
+    material_name: ClassVar[str] = "Material"  # class name of this law's per-layer record
+    params: ClassVar[dict[str, Key]] = {}  # declared once: config keys, Material fields, per-cell fields
+    stiffness: ClassVar[str] = "shear_modulus"  # the parameter material.film.modulus_ratio scales
+
+    def __init__(self):
+        self.material_class = _material_class(self)
+        self._floats: _FloatEvaluator | None = None
+
+    def free_energy(self, F, s, p):
+        """psi(F, s) as (bulk, constraint): psi = bulk + constraint, the constraint part (a penalty on a
+        volumetric constraint) integrated with the coupling quadrature (one point per cell)."""
+        raise NotImplementedError
+
+    def dissipation(self, dQ, C_n, s_n, tau, p):
+        """tau * phi of the step: the dissipation potential of the fluid-volume increment dQ = tau H,
+        with the previous step's right Cauchy-Green tensor C_n and fluid content s_n."""
+        raise NotImplementedError
+
+    def reference_fluid(self, p) -> float:
+        """s0: the fluid content at which F = 1 is stress-free (the layer's reference state)."""
+        raise NotImplementedError
+
+    def material(self, values: dict) -> Material:
+        """The per-layer record of parameter values (floats)."""
+        return self.material_class.from_dict(values)
+
+    @property
+    def floats(self) -> _FloatEvaluator:
+        if self._floats is None:
+            self._floats = _FloatEvaluator(self)
+        return self._floats
+
+
+LAWS: Registry[MaterialLaw] = Registry("material law")
 
 
 @dataclass(frozen=True)
-class Hydrogel:
-    """Material parameters of one layer (units: MPa, mm^4/(N s), dimensionless)."""
+class Material:
+    """One layer's parameter values under a law (its fields are the law's declared parameters)."""
 
-    shear_modulus: float  # gamma
-    mixing_modulus: float  # alpha
-    penalty: float  # epsilon
-    mobility: float  # M
-    preswelling: float  # J0
-    interaction: float  # chi
+    law: ClassVar[MaterialLaw]
 
     @classmethod
-    def from_dict(cls, d: dict) -> Hydrogel:
-        return cls(**{k: float(d[k]) for k in cls.__dataclass_fields__})
+    def from_dict(cls, d: dict) -> Material:
+        return cls(**{k: float(d[k]) for k in cls.law.params})
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        return dataclasses.asdict(self)
 
     @property
     def s0(self) -> float:
-        """Fluid content of the stress-free preswollen reference state, eq. 3.5."""
-        g, e, J0 = self.shear_modulus, self.penalty, self.preswelling
-        return g / e * (J0 ** (-1.0 / 3.0) - 1.0 / J0) + J0 - 1.0
+        """Fluid content of the stress-free reference state."""
+        return self.law.reference_fluid(self)
 
     @property
     def mu0(self) -> float:
-        """Chemical potential of the reference state, eq. 3.6 (= dpsi/ds at F = 1, s = s0)."""
-        return chemical_potential_value(self, 1.0, self.s0)
+        """Chemical potential of the reference state: dpsi/ds at F = 1, s = s0."""
+        return chemical_potential(self, IDENTITY, self.s0)
 
 
-def _log(x):
-    return ufl.ln(x) if isinstance(x, ufl.core.expr.Expr) else math.log(x)
+def _material_class(law: MaterialLaw) -> type:
+    cls = dataclasses.make_dataclass(law.material_name, [(name, float) for name in law.params], bases=(Material,),
+                                     frozen=True, namespace={"law": law})
+    cls.__module__ = type(law).__module__
+    return cls
 
 
-def free_energy_parts(mat, F, s):
-    """(network, mixing, coupling) parts of psi(F, s) of eq. 3.4 in plane strain.
+# --- derived quantities: the same UFL derivatives for forms, fields and floats ------------------
 
-    F is 2x2 (UFL), s the fluid content; ``mat`` may hold floats or UFL coefficients (per-cell
-    parameter fields). The coupling part is the penalty on J J0 = 1 + s, the volumetric constraint."""
-    g, a, e, J0, chi = mat.shear_modulus, mat.mixing_modulus, mat.penalty, mat.preswelling, mat.interaction
-    J = ufl.det(F)
-    FF = ufl.inner(F, F) + 1.0  # out-of-plane stretch 1
-    psi_mech = g / (2 * J0) * (J0 ** (2.0 / 3.0) * FF - 3 - 2 * ufl.ln(J * J0))
-    psi_chem = a / J0 * (s * ufl.ln(s / (1 + s)) + chi * s / (1 + s))
-    psi_coup = e / (2 * J0) * (J * J0 - 1 - s) ** 2
-    return psi_mech, psi_chem, psi_coup
+
+def _is_ufl(*xs) -> bool:
+    return any(isinstance(x, ufl.core.expr.Expr) for x in xs)
 
 
 def free_energy(mat, F, s):
-    """psi(F, s) of eq. 3.4 in plane strain."""
-    return sum(free_energy_parts(mat, F, s))
+    """psi(F, s) of ``mat``'s law (UFL)."""
+    bulk, constraint = mat.law.free_energy(F, s, mat)
+    return bulk + constraint
 
 
-def chemical_potential(mat, J, s):
-    """mu = dpsi/ds at fixed F (eq. 2.6), written out; works for UFL and floats."""
-    a, e, J0, chi = mat.mixing_modulus, mat.penalty, mat.preswelling, mat.interaction
-    return a / J0 * (_log(s / (1 + s)) + 1 / (1 + s) + chi / (1 + s) ** 2) - e / J0 * (J * J0 - 1 - s)
+def chemical_potential(mat, F, s):
+    """mu = dpsi/ds at fixed F: a UFL expression for UFL ``F``/``s``, a float for floats (``mat`` a
+    :class:`Material`, ``F`` 2x2 numbers)."""
+    if not _is_ufl(F, s):
+        return mat.law.floats.chemical_potential(mat, F, s)
+    F, s = ufl.variable(F), ufl.variable(s)
+    return ufl.diff(free_energy(mat, F, s), s)
 
 
-def chemical_potential_value(mat: Hydrogel, J: float, s: float) -> float:
-    return float(chemical_potential(mat, J, s))
+def first_piola(mat, F, s):
+    """P = dpsi/dF (2x2, plane strain): UFL for UFL arguments, a 2x2 array for floats."""
+    if not _is_ufl(F, s):
+        return mat.law.floats.first_piola(mat, F, s)
+    F, s = ufl.variable(F), ufl.variable(s)
+    return ufl.diff(free_energy(mat, F, s), F)
 
 
-def dissipation_increment(mat, dQ, C_n, s_n, tau):
-    """tau * phi(H = dQ/tau; C_n, s_n) of eq. 3.4 written in the flux increment dQ = tau H.
+class _FloatEvaluator:
+    """A law's mu and P as UFL expressions of placeholder constants (parameters, F, s), differentiated
+    once and evaluated by UFL for float arguments: reference values come from the same derivative the
+    forms use, not from a formula written twice."""
 
-    phi = C_n:(H x H) / (2 J0^(1/3) M s_n); with H = dQ/tau this is C_n:(dQ x dQ)/(2 tau J0^(1/3) M s_n).
-    ``C_n`` is the 2x2 in-plane right Cauchy-Green tensor of the previous step (the flux is
-    in-plane, so the out-of-plane entry never enters)."""
-    J0, M = mat.preswelling, mat.mobility
-    return ufl.inner(C_n * dQ, dQ) / (2 * tau * J0 ** (1.0 / 3.0) * M * s_n)
+    def __init__(self, law: MaterialLaw):
+        domain = ufl.Mesh(ufl.VectorElement("Lagrange", ufl.quadrilateral, 1))
+        self.params = {name: ufl.Constant(domain) for name in law.params}
+        self.F = ufl.Constant(domain, shape=(2, 2))
+        self.s = ufl.Constant(domain)
+        F, s = ufl.variable(self.F), ufl.variable(self.s)
+        bulk, constraint = law.free_energy(F, s, SimpleNamespace(**self.params))
+        psi = bulk + constraint
+        self.mu = _lowered(ufl.diff(psi, s))
+        P = _lowered(ufl.diff(psi, F))
+        self.P = [[P[i, j] for j in range(2)] for i in range(2)]
+
+    def _mapping(self, mat, F, s) -> dict:
+        values = {c: getattr(mat, name) for name, c in self.params.items()}
+        values[self.F] = tuple(tuple(float(v) for v in row) for row in np.asarray(F, dtype=float))
+        values[self.s] = float(s)
+        return values
+
+    def chemical_potential(self, mat, F, s) -> float:
+        return float(self.mu((), self._mapping(mat, F, s)))
+
+    def first_piola(self, mat, F, s) -> np.ndarray:
+        m = self._mapping(mat, F, s)
+        return np.array([[float(Pij((), m)) for Pij in row] for row in self.P])
 
 
-def first_piola(mat: Hydrogel, F, s):
-    """P = dpsi/dF (2x2, plane strain), for post-processing and tests."""
-    g, e, J0 = mat.shear_modulus, mat.penalty, mat.preswelling
-    J = ufl.det(F)
-    Finv_T = ufl.inv(F).T
-    return g / J0 * (J0 ** (2.0 / 3.0) * F - Finv_T) + e * (J * J0 - 1 - s) * J * Finv_T
-
-
-# --- closed-form reference solutions (floats) ------------------------------------------------
-
-
-def constrained_layer_fluid(mat: Hydrogel, stretch: float) -> float:
-    """Fluid content s of a laterally constrained, traction-free layer at thickness stretch l.
-
-    With F = diag(1, l, 1), P_yy = 0 gives s(l) = l J0 - 1 + gamma/(eps J0) (J0^(2/3) l - 1/l)."""
-    g, e, J0 = mat.shear_modulus, mat.penalty, mat.preswelling
-    return stretch * J0 - 1 + g / (e * J0) * (J0 ** (2.0 / 3.0) * stretch - 1 / stretch)
-
-
-def constrained_layer_stretch(mat: Hydrogel, mu_bar: float) -> float:
-    """Steady thickness stretch of a laterally constrained layer in contact with mu_bar."""
-    from scipy.optimize import brentq
-
-    def residual(lam):
-        return chemical_potential_value(mat, lam, constrained_layer_fluid(mat, lam)) - mu_bar
-
-    return brentq(residual, 1.0 + 1e-12, 1.0e3, xtol=1e-14, rtol=1e-14)
+def _lowered(expr):
+    return expand_derivatives(apply_algebra_lowering(expr))

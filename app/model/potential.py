@@ -13,25 +13,31 @@ is symmetric by construction (both from ``ufl.derivative``).
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 from dataclasses import dataclass
 
 import ufl
 
 from app import compat
-from app.model.material import chemical_potential, dissipation_increment, free_energy_parts
+from app.model import DEFAULT_LAW
+from app.model.material import LAWS, chemical_potential
 
 
-@dataclass
-class MaterialFields:
-    """Per-cell (DG0) material parameters, so any number of layers shares one set of forms."""
+@functools.cache
+def fields_class(law) -> type:
+    """The record of per-cell (DG0) material fields under ``law``: one field per declared parameter, then
+    ``s0`` (the reference fluid content), in that order; ``law`` is a class attribute. With them any
+    number of layers shares one set of forms, and the law's psi reads ``fields.<parameter>``."""
+    cls = dataclasses.make_dataclass("MaterialFields", [(name, object) for name in (*law.params, "s0")],
+                                     namespace={"law": law})
+    cls.__module__ = __name__
+    return cls
 
-    shear_modulus: object
-    mixing_modulus: object
-    penalty: object
-    mobility: object
-    preswelling: object
-    interaction: object
-    s0: object
+
+# The default law's record, by name: app/solvers/stability.py copies the fields with
+# dataclasses.fields(MaterialFields); law-independent code uses type(problem.mat).
+MaterialFields = fields_class(LAWS.get(DEFAULT_LAW))
 
 
 @dataclass
@@ -56,28 +62,28 @@ def kinematics(w, state):
     return u, dQ, F, F_n, Q_n
 
 
-def build(w, state, mat: MaterialFields, tau, mu_bar, dx, ds_permeable, dx_coupling=None) -> Potential:
+def build(w, state, mat, tau, mu_bar, dx, ds_permeable, dx_coupling=None) -> Potential:
     """Assemble Pi^tau symbolically and differentiate it.
 
     ``ds_permeable`` is the measure of the boundary where the chemical potential is prescribed
     (None for none); elsewhere the normal flux is fixed by Dirichlet conditions on dQ.
-    ``dx_coupling`` integrates the volumetric penalty (J J0 - 1 - s)^2: with one point per cell
+    ``dx_coupling`` integrates the law's constraint part (the hydrogel's volumetric penalty
+    (J J0 - 1 - s)^2): with one point per cell
     it enforces the constraint against the cell's (constant) fluid content once per cell, as a
     Q1/P0 pair does, instead of at every Gauss point, which locks Q1 elements in bending."""
     u, dQ, F, F_n, Q_n = kinematics(w, state)
     s_n = mat.s0 - ufl.div(Q_n)
     s = s_n - ufl.div(dQ)
     C_n = F_n.T * F_n
-    psi_mech, psi_chem, psi_coup = free_energy_parts(mat, F, s)
-    energy = (psi_mech + psi_chem) * dx + psi_coup * (dx_coupling or dx) \
-        + dissipation_increment(mat, dQ, C_n, s_n, tau) * dx
+    bulk, constraint = mat.law.free_energy(F, s, mat)
+    energy = bulk * dx + constraint * (dx_coupling or dx) + mat.law.dissipation(dQ, C_n, s_n, tau, mat) * dx
     if ds_permeable is not None:
         n = ufl.FacetNormal(w.function_space.mesh)
         energy += mu_bar * ufl.dot(dQ, n) * ds_permeable
     W = w.function_space
     residual = ufl.derivative(energy, w, ufl.TestFunction(W))
     hessian = ufl.derivative(residual, w, ufl.TrialFunction(W))
-    mu = chemical_potential(mat, ufl.det(F), s)
+    mu = chemical_potential(mat, F, s)
     return Potential(energy, residual, hessian, F, s, s_n, mu)
 
 

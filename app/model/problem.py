@@ -14,8 +14,8 @@ import ufl
 
 from app import compat, config, geometry
 from app.geometry import GeometrySetup
-from app.model.material import Hydrogel
-from app.model.potential import CompiledForms, MaterialFields, build
+from app.model.material import Material
+from app.model.potential import CompiledForms, MaterialFields, build, fields_class
 
 
 @dataclass
@@ -44,9 +44,10 @@ class Loading:
         return [self.ramp_time] if self.kind == "swelling" else []
 
 
-def layer_materials(cfg: dict, names=("film", "substrate")) -> dict[str, Hydrogel]:
-    """Hydrogel parameters of each named material (film, substrate, [material.layers.*])."""
-    return {name: Hydrogel.from_dict(config.layer_parameters(cfg, name)) for name in names}
+def layer_materials(cfg: dict, names=("film", "substrate")) -> dict[str, Material]:
+    """Parameters of each named material (film, substrate, [material.layers.*]) under the config's law."""
+    law = config.law(cfg)
+    return {name: law.material(config.layer_parameters(cfg, name)) for name in names}
 
 
 class Problem:
@@ -101,17 +102,18 @@ class Problem:
     # --- setup helpers ---------------------------------------------------------------------
 
     def _material_fields(self) -> MaterialFields:
+        """The law's parameters and s0 as per-cell (DG0) fields, each cell carrying its layer's values."""
         V0 = compat.scalar_space(self.domain, "DG", 0)
-        names = ["shear_modulus", "mixing_modulus", "penalty", "mobility", "preswelling", "interaction", "s0"]
+        law = next(iter(self.materials.values())).law
         fields = {}
-        for name in names:
+        for name in (*law.params, "s0"):
             f = compat.Function(V0)
             f.name = name
             for group, mat_name in self.geo.layers.items():
                 mat = self.materials[mat_name]
-                f.x.array[self.tm.cells(group)] = mat.s0 if name == "s0" else getattr(mat, name)
+                f.x.array[self.tm.cells(group)] = getattr(mat, name)
             fields[name] = f
-        return MaterialFields(**fields)
+        return fields_class(law)(**fields)
 
     def _surface_material(self) -> str:
         """The material under the permeable surface (the film): the ramp starts at its mu0."""

@@ -1,4 +1,10 @@
-"""Closed-form references used to validate the stability analysis.
+"""Closed-form references used to validate the model and the stability analysis, for the hydrogel law.
+
+Written from the constitutive equations independently of the FE code path (tests check them against
+the UFL derivatives of the law: :mod:`app.model.material`).
+
+Constrained layer: a laterally constrained, traction-free layer (F = diag(1, l)) has P_yy = 0 in
+closed form, s(l); its steady stretch in contact with mu_bar solves mu(l, s(l)) = mu_bar.
 
 Stiff film on a compliant substrate in plane strain (Allen; Chen & Hutchinson): a film of
 thickness h on a deep substrate wrinkles at the compressive strain
@@ -18,13 +24,15 @@ import math
 
 from scipy.optimize import brentq
 
-from app.model.material import Hydrogel
+from app.model.hydrogel import Hydrogel
+from app.model.material import chemical_potential
 
 BIOT_STRETCH = 0.5437
 
 
 def _undrained_pxx(mat: Hydrogel, e: float) -> float:
-    """P_xx of F = diag(1 + e, l) with P_yy = 0 and s = s0 (plane strain)."""
+    """P_xx of F = diag(1 + e, l) with P_yy = 0 and s = s0 (plane strain); P written out for this F
+    (tests/test_material.py checks it against the law's UFL P = dpsi/dF)."""
     g, eps, J0, s0 = mat.shear_modulus, mat.penalty, mat.preswelling, mat.s0
     a = 1.0 + e
 
@@ -50,3 +58,20 @@ def film_wrinkling_strain(film: Hydrogel, substrate: Hydrogel) -> float:
 def film_wrinkling_wavelength(film: Hydrogel, substrate: Hydrogel, thickness: float) -> float:
     Ef, Es = plane_strain_modulus(film), plane_strain_modulus(substrate)
     return 2 * math.pi * thickness * (Ef / (3 * Es)) ** (1 / 3)
+
+
+def constrained_layer_fluid(mat: Hydrogel, stretch: float) -> float:
+    """Fluid content s of a laterally constrained, traction-free layer at thickness stretch l.
+
+    With F = diag(1, l, 1), P_yy = 0 gives s(l) = l J0 - 1 + gamma/(eps J0) (J0^(2/3) l - 1/l)."""
+    g, e, J0 = mat.shear_modulus, mat.penalty, mat.preswelling
+    return stretch * J0 - 1 + g / (e * J0) * (J0 ** (2.0 / 3.0) * stretch - 1 / stretch)
+
+
+def constrained_layer_stretch(mat: Hydrogel, mu_bar: float) -> float:
+    """Steady thickness stretch of a laterally constrained layer in contact with mu_bar."""
+
+    def residual(lam):
+        return chemical_potential(mat, ((1.0, 0.0), (0.0, lam)), constrained_layer_fluid(mat, lam)) - mu_bar
+
+    return brentq(residual, 1.0 + 1e-12, 1.0e3, xtol=1e-14, rtol=1e-14)
