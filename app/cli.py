@@ -137,20 +137,9 @@ def cmd_run(args) -> int:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
     outdir = Path(args.output) if args.output else Path("results") / Path(args.config).stem
-    from app.workflows.run import simulate
+    from app.workflows.pipeline import run_case
 
-    summary = simulate(cfg, outdir, comm)
-    if summary["status"] == "buckled" and cfg["stability"]["error_estimate"]:
-        from app.workflows.convergence import companion_error_estimate
-        from app.logging_setup import get
-        from app.io.output import rewrite_summary
-
-        est = companion_error_estimate(cfg, summary["critical"]["growth_um"], outdir, comm)
-        summary["critical"]["discretization_error"] = est
-        rewrite_summary(outdir, comm, summary)
-        c = summary["critical"]
-        get().info(f"hydrobuckle: g_c = {c['growth_um']:.4f} um +- {est['total_um']:.4f} um (estimated "
-                   f"discretization error: time {est.get('time_um') or 0:.4f}, mesh {est.get('mesh_um') or 0:.4f})")
+    summary = run_case(cfg, outdir, comm)
     return EXIT_OK if summary["status"] != "failed" else EXIT_SOLVER
 
 

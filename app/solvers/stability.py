@@ -27,7 +27,7 @@ from petsc4py import PETSc
 from slepc4py import SLEPc
 
 from app import compat, timing
-from app.model.potential import MaterialFields, build
+from app.model.potential import build
 from app.solvers import mumps
 
 
@@ -49,14 +49,14 @@ def zero_increment_hessian(problem, tau: float):
     p = problem
     work, state = compat.Function(p.W), compat.Function(p.W)
     fields = {}
-    for f in dataclasses.fields(MaterialFields):
+    for f in dataclasses.fields(p.mat):  # whatever record of per-cell fields the material law has
         source = getattr(p.mat, f.name)
         fields[f.name] = compat.Function(source.function_space)
         fields[f.name].x.array[:] = source.x.array
     tau_c = compat.Constant(p.domain, compat.ScalarType(tau))
     mu_bar = compat.Constant(p.domain, compat.ScalarType(0.0))  # does not enter K (linear in dQ)
     surface = p.ds_permeable if p.loading.kind == "swelling" else None
-    pot = build(work, state, MaterialFields(**fields), tau_c, mu_bar, p.dx, surface, p.dx_coupling)
+    pot = build(work, state, type(p.mat)(**fields), tau_c, mu_bar, p.dx, surface, p.dx_coupling)
     return compat.form(pot.hessian), work, state, tau_c
 
 

@@ -32,15 +32,13 @@ SIZES = {"coarse": 2.0, "default": 1.0, "fine": 0.7, "finer": 0.5}  # element si
 
 
 def size_config(name: str, overrides: list[str]) -> dict:
+    from app.workflows.variants import variant
+
     scale = SIZES[name]
     cfg = config.resolve({}, list(overrides))
-    cfg["mesh"]["element_size"] = cfg["mesh"]["element_size"] * scale
-    cfg["mesh"]["film_layers"] = max(1, round(cfg["mesh"]["film_layers"] / scale))
-    cfg["output"]["fields"] = False
-    cfg["output"]["plot"] = False
-    cfg["stability"]["error_estimate"] = False
-    config.validate(cfg)
-    return cfg
+    return variant(cfg, {"mesh.element_size": cfg["mesh"]["element_size"] * scale,
+                         "mesh.film_layers": max(1, round(cfg["mesh"]["film_layers"] / scale)),
+                         "output.plot": False, "stability.error_estimate": False})
 
 
 def bench_one(cfg: dict, comm, outdir: Path) -> dict:

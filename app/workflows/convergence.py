@@ -14,7 +14,6 @@ and mesh errors; its converged estimate adds both corrections.
 
 from __future__ import annotations
 
-import copy
 import csv
 import json
 import math
@@ -22,6 +21,7 @@ from pathlib import Path
 
 from app import config, logging_setup
 from app.workflows.run import simulate
+from app.workflows.variants import variant
 
 
 def richardson(values: list[float], ratio: float) -> dict:
@@ -61,29 +61,23 @@ def refined_configs(cfg: dict, study: str, levels: int, time_factor: float, mesh
     out = []
     for k in range(levels):
         e = -k if coarsen else k
-        c = copy.deepcopy(cfg)
+        changes = {"stability.stop_at_onset": True}
         if study == "time":
-            if c["time"]["adaptive"]:
-                c["time"]["tolerance"] = cfg["time"]["tolerance"] / time_factor ** e
-                value = c["time"]["tolerance"]
+            if cfg["time"]["adaptive"]:
+                value = changes["time.tolerance"] = cfg["time"]["tolerance"] / time_factor ** e
             else:
-                c["time"]["dt_initial"] = cfg["time"]["dt_initial"] / 2 ** e
-                c["time"]["dt_min"] = min(c["time"]["dt_min"], c["time"]["dt_initial"])
-                c["time"]["dt_max"] = max(c["time"]["dt_max"], c["time"]["dt_initial"])
-                value = c["time"]["dt_initial"]
+                value = dt = cfg["time"]["dt_initial"] / 2 ** e
+                changes.update({"time.dt_initial": dt, "time.dt_min": min(cfg["time"]["dt_min"], dt),
+                                "time.dt_max": max(cfg["time"]["dt_max"], dt)})
         else:
-            c["mesh"]["element_size"] = cfg["mesh"]["element_size"] / mesh_factor ** e
+            value = changes["mesh.element_size"] = cfg["mesh"]["element_size"] / mesh_factor ** e
             layers = cfg["mesh"]["film_layers"] * mesh_factor ** e
             if layers < 1 or abs(layers - round(layers)) > 1e-9:
                 raise config.ConfigError("mesh.film_layers", f"= {cfg['mesh']['film_layers']} cannot be coarsened "
                                          f"{k} times by {mesh_factor:g}; allowed: a multiple of "
                                          f"{mesh_factor ** k:g}")
-            c["mesh"]["film_layers"] = int(round(layers))
-            value = c["mesh"]["element_size"]
-        c["output"]["fields"] = False
-        c["stability"]["stop_at_onset"] = True
-        config.validate(c)
-        out.append((f"{study}{k}", value, c))
+            changes["mesh.film_layers"] = int(round(layers))
+        out.append((f"{study}{k}", value, variant(cfg, changes)))
     return out
 
 
@@ -171,41 +165,3 @@ def _fmt(v):
     if v is None:
         return "-"
     return f"{v:.4g}" if isinstance(v, float) else str(v)
-
-
-# Orders assumed by the single-run error estimate (measured in docs/validation.md: time ~1.2,
-# mesh ~1.8 on the default bilayer); the lower values make the estimate conservative.
-ASSUMED_TIME_ORDER = 1.0
-ASSUMED_MESH_ORDER = 1.5
-
-
-def companion_error_estimate(cfg: dict, g_c_um: float, outdir, comm) -> dict:
-    """Discretization error of one run's g_c from two cheaper companion runs.
-
-    Time: the same mesh with the tolerance x4 (steps x2); mesh: element size x2 and half the film
-    layers (when even). Each error is |g - g_coarse| / (2^p - 1) with the assumed order p."""
-    log = logging_setup.get()
-    out = {"method": f"companion runs coarsened by 2 in time and mesh, assumed orders "
-                     f"{ASSUMED_TIME_ORDER:g} (time) and {ASSUMED_MESH_ORDER:g} (mesh)"}
-    total = 0.0
-    for study, order in (("time", ASSUMED_TIME_ORDER), ("mesh", ASSUMED_MESH_ORDER)):
-        try:
-            _, _, c = refined_configs(cfg, study, 2, 4.0, 2.0, coarsen=True)[1]
-        except config.ConfigError as err:
-            out[f"{study}_um"] = None
-            out[f"{study}_note"] = str(err)
-            continue
-        c["output"]["plot"] = False
-        log.info(f"error estimate: companion run coarsened in {study}")
-        s = simulate(c, Path(outdir) / "error-estimate" / study, comm)
-        g = s.get("critical", {}).get("growth_um")
-        if g is None:
-            out[f"{study}_um"] = None
-            continue
-        err = abs(g_c_um - g) / (2 ** order - 1)
-        out[f"{study}_um"] = err
-        out[f"{study}_companion_g_c_um"] = g
-        total += err
-    out["total_um"] = total
-    out["relative"] = total / g_c_um if g_c_um else None
-    return out

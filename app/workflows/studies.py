@@ -150,7 +150,7 @@ def is_complete(case: Case) -> bool:
 
 def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = False) -> None:
     """Run every case (skipping complete ones) on groups of ``ranks_per_case`` ranks."""
-    from app.workflows.run import simulate
+    from app.workflows.pipeline import run_case
 
     log = logging_setup.get()
     k = max(1, min(ranks_per_case, comm.size))
@@ -169,14 +169,7 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
                 log.info(f"study: {case.label}: running on {sub.size} rank(s)")
             t0 = time.perf_counter()
             try:
-                s = simulate(case.cfg, case.outdir, sub, progress=False)
-                if case.cfg["stability"]["error_estimate"] and s["status"] == "buckled":
-                    from app.workflows.convergence import companion_error_estimate
-                    from app.io.output import rewrite_summary
-
-                    s["critical"]["discretization_error"] = companion_error_estimate(
-                        case.cfg, s["critical"]["growth_um"], case.outdir, sub)
-                    rewrite_summary(case.outdir, sub, s)
+                run_case(case.cfg, case.outdir, sub, progress=False)
             except Exception as err:  # a failed case is reported, the others go on
                 if sub.rank == 0:
                     log.info(f"study: {case.label}: failed: {err}")
