@@ -17,8 +17,6 @@ from app.schema import ConfigError, Key  # noqa: F401  (re-exported: config.Conf
 from app.schema import ge as _ge, gt as _gt, in_closed as _in_closed, in_open as _in_open
 from app.schema import key as _key, one_of as _one_of, unset
 
-LOADING_KINDS = ("swelling", "compression")
-
 _STATIC: dict[str, dict[str, Key] | dict] = {
     "geometry": {},  # built from the registered geometry kinds: see _geometry_table
     "mesh": {
@@ -34,12 +32,7 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
                                            "selective reduced integration)"),
     },
     "material": {},  # built from the registered material laws: see _material_table
-    "loading": {
-        "kind": _key(str, "swelling", _one_of(*LOADING_KINDS)),
-        "chemical_potential": _key(float, 0.0, _in_closed(-1000.0, 0.0), "mu_bar after the ramp [MPa]"),
-        "ramp_time": _key(float, 1.0, _gt(0), "[s]"),
-        "compression_strain": _key(float, 0.1, _in_open(0.0, 0.9), "compression loading only"),
-    },
+    "loading": {},  # built from the registered loadings: see _loading_table
     "time": {
         "end": _key(float, 10.0, _gt(0), "[s]"),
         "dt_initial": _key(float, 1.0e-3, _gt(0), "[s]"),
@@ -82,10 +75,10 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
 
 
 def schema() -> dict:
-    """The whole schema: the static tables above, with the geometry and material tables built from the
-    registered geometry kinds and material laws (so one registered later, e.g. by a test, is part of it
-    at once)."""
-    return {**_STATIC, "geometry": _geometry_table(), "material": _material_table()}
+    """The whole schema: the static tables above, with the geometry, material and loading tables built
+    from the registered geometry kinds, material laws and loadings (so one registered later, e.g. by a
+    test, is part of it at once)."""
+    return {**_STATIC, "geometry": _geometry_table(), "material": _material_table(), "loading": _loading_table()}
 
 
 def _kinds():
@@ -151,6 +144,25 @@ def _material_table() -> dict:
     }
 
 
+def _loadings():
+    from app.model import loading
+
+    return loading.LOADINGS
+
+
+def _loading_table() -> dict:
+    """``kind`` and every registered loading's keys with their defaults (a loading reads its own)."""
+    from app.model import loading
+
+    table: dict[str, Key] = {"kind": _key(str, loading.DEFAULT_LOADING, _one_of(*_loadings().names()))}
+    for lo in _loadings():
+        for name, spec in lo.keys.items():
+            if name in table and table[name] is not spec:
+                raise ValueError(f"loading.{name}: loadings declare it differently")
+            table[name] = spec
+    return table
+
+
 def kind_defaults() -> dict:
     """kind -> {"geometry": its keys' defaults, "mesh": its mesh-key defaults}."""
     return {k.name: {"geometry": k.defaults(), "mesh": dict(k.mesh_defaults)} for k in _kinds()}
@@ -158,7 +170,7 @@ def kind_defaults() -> dict:
 
 def __getattr__(name: str):
     """Names computed from the registries: SCHEMA, GEOMETRY_KINDS, KIND_DEFAULTS, KIND_GEOMETRY_KEYS,
-    MATERIAL_KEYS."""
+    MATERIAL_KEYS, LOADING_KINDS."""
     if name == "SCHEMA":
         return schema()
     if name == "MATERIAL_KEYS":
@@ -169,6 +181,8 @@ def __getattr__(name: str):
         return kind_defaults()
     if name == "KIND_GEOMETRY_KEYS":
         return {k.name: set(k.keys) for k in _kinds()}
+    if name == "LOADING_KINDS":
+        return _loadings().names()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -341,10 +355,12 @@ def validate(cfg: dict) -> None:
     kind.validate(cfg)
     if kind.named_materials:
         _validate_material_layers(cfg, sch)
-    if cfg["loading"]["kind"] == "compression" and "drive" not in kind.provides:
-        able = [k.name for k in _kinds() if "drive" in k.provides]
-        raise ConfigError("loading.kind", "'compression' needs geometry.kind = " + " or ".join(map(repr, able))
-                          + f"; allowed for {kind.name!r}: 'swelling'")
+    loading = _loadings().get(cfg["loading"]["kind"])
+    if not loading.needs <= kind.provides:
+        able = [k.name for k in _kinds() if loading.needs <= k.provides]
+        allowed = [lo.name for lo in _loadings() if lo.needs <= kind.provides]
+        raise ConfigError("loading.kind", f"{loading.name!r} needs geometry.kind = " + " or ".join(map(repr, able))
+                          + f"; allowed for {kind.name!r}: " + ", ".join(map(repr, allowed)))
     if time["dt_initial"] > time["dt_max"]:
         raise ConfigError("time.dt_initial", f"= {time['dt_initial']:g} must be <= time.dt_max = {time['dt_max']:g}")
     if time["dt_min"] > time["dt_initial"]:

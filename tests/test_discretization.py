@@ -149,10 +149,11 @@ def test_residual_vanishes_in_the_reference_state(comm, ratio):
     residual vanishes for a homogeneous gel and, for a bilayer, equals the jump of mu0 across the
     interface (the initial chemical mismatch between layers; README, "Each layer has its own
     reference state")."""
-    p = Problem.from_config(small_bilayer(**{"material.film.modulus_ratio": ratio}), comm)
+    cfg = small_bilayer(**{"material.film.modulus_ratio": ratio})
+    p = Problem.from_config(cfg, comm)
     p.set_time(0.0, 0.01)
     nu, nq = _block_norms(p, _residual(p))
-    scale = p.materials["substrate"].shear_modulus * p.cfg["geometry"]["film_thickness"]
+    scale = p.materials["substrate"].shear_modulus * cfg["geometry"]["film_thickness"]
     assert nu < 1e-10 * scale
     jump = abs(p.materials["film"].mu0 - p.materials["substrate"].mu0)
     if ratio == 1.0:
@@ -160,7 +161,7 @@ def test_residual_vanishes_in_the_reference_state(comm, ratio):
     else:
         # An RTCF basis function carries a total flux of +-1 through its facet (contravariant Piola),
         # so each interface facet's row is +-jump; the norm over all interface facets follows.
-        n_facets = round(p.cfg["geometry"]["length"] / p.cfg["mesh"]["element_size"])
+        n_facets = round(cfg["geometry"]["length"] / cfg["mesh"]["element_size"])
         assert nq == pytest.approx(jump * np.sqrt(n_facets), rel=1e-8)
 
 

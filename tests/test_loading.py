@@ -29,3 +29,52 @@ def test_quasi_static_swelling_follows_equilibrium_at_step_end(comm):
         growth = r.growth_mm / h
         expected = constrained_layer_stretch(mat, p.loading.mu_bar(r.time)) - 1
         assert growth == pytest.approx(expected, rel=0.02), r.time
+
+
+# --- the loading strategies against hand values ---------------------------------------------------
+
+BILAYER_ROLES = {"left": "roller_x", "right": "roller_x", "bottom": "roller_y", "top": "permeable"}
+
+
+def test_swelling_ramp_kinks_and_conditions_by_role():
+    from app.model.loading import LOADINGS
+
+    lo = LOADINGS.get("swelling")({"chemical_potential": -4.0, "ramp_time": 2.0}, mu_start=-84.0, end_time=10.0)
+    assert [lo.mu_bar(t) for t in (-1.0, 0.0, 0.5, 1.0, 2.0, 7.0)] == [-84.0, -84.0, -64.0, -44.0, -4.0, -4.0]
+    assert lo.kinks() == [2.0]
+    assert lo.applied_strain(5.0) == 0.0 and lo.applied_displacement(5.0) == 0.0
+    assert lo.surface_term and lo.kind == "swelling"
+    bc = lo.conditions(BILAYER_ROLES)
+    assert bc.held == (("left", "right"), ("bottom",)) and bc.driven is None and bc.flux_open == ("top",)
+    tube = lo.conditions({"inner": "permeable", "outer": "fixed", "side": "free"})
+    assert tube.held == (("outer",), ("outer",)) and tube.flux_open == ("inner",)
+
+
+def test_compression_moves_the_driven_edge_with_diffusion_off():
+    from app.geometry import Drive
+    from app.model.loading import LOADINGS
+
+    drive = Drive("right", 0, 2.0)
+    lo = LOADINGS.get("compression")({"chemical_potential": 0.0, "ramp_time": 1.0, "compression_strain": 0.1},
+                                     mu_start=-80.0, end_time=10.0, drive=drive)
+    assert lo.applied_strain(0.0) == 0.0 and lo.applied_strain(5.0) == 0.05 and lo.applied_strain(20.0) == 0.1
+    assert lo.applied_displacement(5.0) == -0.1 and lo.applied_displacement(20.0) == -0.2
+    assert lo.kinks() == [] and not lo.surface_term
+    assert lo.mu_bar(0.5) == -40.0  # the ramp is recorded in the history, it does not act
+    bc = lo.conditions(BILAYER_ROLES)
+    assert bc.held == (("left",), ("bottom",)) and bc.driven == drive and bc.flux_open is None
+
+
+def test_loading_keys_and_kinds_come_from_the_registry():
+    from app.model.loading import LOADINGS
+
+    assert config.LOADING_KINDS == LOADINGS.names() == ("swelling", "compression")
+    cfg = config.resolve({})
+    for lo in LOADINGS:
+        for name, key in lo.keys.items():
+            assert config.SCHEMA["loading"][name] is key and cfg["loading"][name] == key.default
+    cfg = config.resolve({}, ["loading.kind=compression", "loading.compression_strain=0.2", "time.end=4"])
+    from app.model.loading import Loading
+
+    lo = Loading.from_config(cfg, mu_start=-1.0, drive=None)
+    assert lo.kind == "compression" and lo.applied_strain(2.0) == 0.1

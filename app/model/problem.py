@@ -1,4 +1,5 @@
-"""Problem setup from a resolved config: mesh, spaces, materials, boundary conditions, loading.
+"""The discrete problem: mesh, spaces, per-cell materials, boundary conditions and loading, built from
+typed objects; :meth:`Problem.from_config` is the one place a resolved config becomes them.
 
 One :class:`Problem` holds everything a time step needs: the unknown w = (u, dQ), the converged
 previous state (u_n, Q_n), the compiled residual/Hessian forms, the Dirichlet conditions and the
@@ -14,34 +15,24 @@ import ufl
 
 from app import compat, config, geometry
 from app.geometry import GeometrySetup
+from app.model.loading import BoundaryConditions, Loading
 from app.model.material import Material
 from app.model.potential import CompiledForms, MaterialFields, build, fields_class
 
 
-@dataclass
-class Loading:
-    """Surface chemical potential ramp (swelling) or end-displacement ramp (compression)."""
+@dataclass(frozen=True)
+class Discretization:
+    """Discretization settings of the forms (the [mesh] quadrature keys) and the step size the forms are
+    first compiled with (``time.dt_initial``; every step sets its own)."""
 
-    kind: str
-    mu_start: float  # the film's mu0: the permeable surface starts in equilibrium with it
-    mu_end: float
-    ramp_time: float
-    end_time: float
-    compression_strain: float
-    length: float
+    quadrature_degree: int = 2  # cell integrals
+    coupling_quadrature_degree: int = 1  # the law's constraint part (one point: no volumetric locking)
+    initial_step: float = 1.0e-3
 
-    def mu_bar(self, t: float) -> float:
-        frac = min(max(t / self.ramp_time, 0.0), 1.0)
-        return self.mu_start + (self.mu_end - self.mu_start) * frac
-
-    def applied_strain(self, t: float) -> float:
-        if self.kind != "compression":
-            return 0.0
-        return self.compression_strain * min(t / self.end_time, 1.0)
-
-    def kinks(self) -> list[float]:
-        """Times where the load rate jumps: steps must not cross them."""
-        return [self.ramp_time] if self.kind == "swelling" else []
+    @classmethod
+    def from_config(cls, cfg: dict) -> Discretization:
+        mesh = cfg["mesh"]
+        return cls(mesh["quadrature_degree"], mesh["coupling_quadrature_degree"], cfg["time"]["dt_initial"])
 
 
 def layer_materials(cfg: dict, names=("film", "substrate")) -> dict[str, Material]:
@@ -55,12 +46,19 @@ class Problem:
 
     @classmethod
     def from_config(cls, cfg: dict, comm, setup: GeometrySetup | None = None) -> Problem:
-        """The problem of a resolved config (the boundary where config dicts become objects)."""
-        return cls(cfg, comm, setup)
+        """The problem of a resolved config (the boundary where config dicts become objects): the geometry
+        (built unless given), each layer's material, the loading (its surface ramp starting at the mu0
+        of the material under the permeable surface) and the discretization settings."""
+        setup = setup if setup is not None else geometry.build(cfg, comm)
+        materials = layer_materials(cfg, sorted(set(setup.layers.values())))
+        surface = setup.material_under("permeable", comm)
+        loading = Loading.from_config(cfg, mu_start=materials[surface].mu0, drive=setup.drive)
+        return cls(comm, setup, materials, loading, Discretization.from_config(cfg))
 
-    def __init__(self, cfg: dict, comm, setup: GeometrySetup | None = None):
-        self.cfg, self.comm = cfg, comm
-        self.geo = setup if setup is not None else geometry.build(cfg, comm)
+    def __init__(self, comm, setup: GeometrySetup, materials: dict[str, Material], loading: Loading,
+                 discretization: Discretization = Discretization()):
+        self.comm = comm
+        self.geo = setup
         self.tm = self.geo.tm
         domain = self.tm.mesh
         self.domain = domain
@@ -73,30 +71,24 @@ class Problem:
         self.V_u, self.u_dofs = compat.collapse(self.W.sub(0))
         self.V_q, self.q_dofs = compat.collapse(self.W.sub(1))
 
-        self.materials = layer_materials(cfg, sorted(set(self.geo.layers.values())))
+        self.materials = materials
         self.mat = self._material_fields()
 
-        self.tau = compat.Constant(domain, compat.ScalarType(cfg["time"]["dt_initial"]))
-        lo = cfg["loading"]
-        self.surface_material = self._surface_material()
-        self.loading = Loading(lo["kind"], self.materials[self.surface_material].mu0, lo["chemical_potential"],
-                               lo["ramp_time"], cfg["time"]["end"], lo["compression_strain"],
-                               cfg["geometry"].get("length") or 0.0)
+        self.tau = compat.Constant(domain, compat.ScalarType(discretization.initial_step))
+        self.loading = loading
         self.mu_bar = compat.Constant(domain, compat.ScalarType(self.loading.mu_bar(0.0)))
 
-        q = cfg["mesh"]["quadrature_degree"]
-        self.dx = ufl.Measure("dx", domain=domain, metadata={"quadrature_degree": q})
-        self.dx_coupling = ufl.Measure("dx", domain=domain,
-                                       metadata={"quadrature_degree": cfg["mesh"]["coupling_quadrature_degree"]})
+        self.dx = ufl.Measure("dx", domain=domain, metadata={"quadrature_degree": discretization.quadrature_degree})
+        self.dx_coupling = ufl.Measure("dx", domain=domain, metadata={
+            "quadrature_degree": discretization.coupling_quadrature_degree})
         self.ds = ufl.Measure("ds", domain=domain, subdomain_data=self.tm.facet_tags)
         permeable = [self.tm.facet_names[g] for g in self.geo.facets_with_role("permeable")]
         self.ds_permeable = self.ds(tuple(permeable))
-        swelling = self.loading.kind == "swelling"
 
         self.pot = build(self.w, self.state, self.mat, self.tau, self.mu_bar, self.dx,
-                         self.ds_permeable if swelling else None, self.dx_coupling)
+                         self.ds_permeable if loading.surface_term else None, self.dx_coupling)
         self.forms = CompiledForms(self.pot)
-        self.bcs, self._right_ux = self._boundary_conditions()
+        self.bcs, self._driven = self._boundary_conditions(loading.conditions(self.geo.boundaries))
         self._observables()
 
     # --- setup helpers ---------------------------------------------------------------------
@@ -115,55 +107,32 @@ class Problem:
             fields[name] = f
         return fields_class(law)(**fields)
 
-    def _surface_material(self) -> str:
-        """The material under the permeable surface (the film): the ramp starts at its mu0."""
-        tdim = self.domain.topology.dim
-        f2c = self.domain.topology.connectivity(tdim - 1, tdim)
-        n_owned = compat.num_owned_cells(self.domain)
-        group_of_cell = {}
-        for group in self.geo.layers:
-            for c in self.tm.cells(group):
-                group_of_cell[int(c)] = group
-        counts: dict[str, int] = {}
-        for g in self.geo.facets_with_role("permeable"):
-            for f in self.tm.facets(g):
-                for c in f2c.links(f):
-                    if c < n_owned and int(c) in group_of_cell:
-                        name = self.geo.layers[group_of_cell[int(c)]]
-                        counts[name] = counts.get(name, 0) + 1
-        totals: dict[str, int] = {}
-        for part in self.comm.allgather(counts):
-            for k, v in part.items():
-                totals[k] = totals.get(k, 0) + v
-        return max(sorted(totals), key=lambda k: totals[k]) if totals else "film"
-
-    def _boundary_conditions(self):
+    def _boundary_conditions(self, bc: BoundaryConditions):
+        """dolfinx Dirichlet conditions of the loading's conditions: (bcs, the driven boundary's
+        displacement function or None)."""
         fdim = self.domain.topology.dim - 1
-        tm, geo = self.tm, self.geo
+        tm = self.tm
         Wu = self.W.sub(0)
 
-        def facets(*roles):
-            groups = geo.facets_with_role(*roles)
+        def facets(groups):
             return np.unique(np.concatenate([tm.facets(g) for g in groups])) if groups else np.empty(0, np.int32)
 
         bcs = []
-        g_right = None
-        compressed = "right" if self.loading.kind == "compression" else None
-        for comp, roles in ((0, ("roller_x", "fixed")), (1, ("roller_y", "fixed"))):
-            groups = [g for g in geo.facets_with_role(*roles) if not (comp == 0 and g == compressed)]
+        for comp, groups in enumerate(bc.held):
             if groups:
-                fs = np.unique(np.concatenate([tm.facets(g) for g in groups]))
-                bcs.append(compat.dirichlet_zero_on_facets(Wu.sub(comp), fs, fdim)[0])
-        if compressed:
-            bc, g_right = compat.dirichlet_function_on_facets(Wu.sub(0), tm.facets(compressed), fdim)
-            bcs.append(bc)
-        if self.loading.kind == "swelling":
-            no_flux = np.setdiff1d(compat.exterior_facets(self.domain), facets("permeable"))
+                bcs.append(compat.dirichlet_zero_on_facets(Wu.sub(comp), facets(groups), fdim)[0])
+        driven = None
+        if bc.driven is not None:
+            dbc, driven = compat.dirichlet_function_on_facets(Wu.sub(bc.driven.component), tm.facets(bc.driven.group),
+                                                              fdim)
+            bcs.append(dbc)
+        if bc.flux_open is not None:
+            no_flux = np.setdiff1d(compat.exterior_facets(self.domain), facets(bc.flux_open))
         else:  # diffusion switched off: every flux dof is zero, s stays s0
             imap = self.domain.topology.index_map(fdim)
             no_flux = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
         bcs.append(compat.dirichlet_zero_on_facets(self.W.sub(1), no_flux.astype(np.int32), fdim)[0])
-        return bcs, g_right
+        return bcs, driven
 
     def _observables(self):
         u_n, Q_n = ufl.split(self.state)
@@ -197,8 +166,8 @@ class Problem:
         """Loading at time t for a step of size tau."""
         self.tau.value = tau
         self.mu_bar.value = self.loading.mu_bar(t)
-        if self._right_ux is not None:
-            self._right_ux.x.array[:] = -self.loading.applied_strain(t) * self.loading.length
+        if self._driven is not None:
+            self._driven.x.array[:] = self.loading.applied_displacement(t)
 
     # --- observables of the converged state ------------------------------------------------
 

@@ -1,0 +1,138 @@
+"""Loadings as strategies, registered by name (``loading.kind``): what drives a run in time and which
+boundary conditions it puts on each boundary role.
+
+A loading owns its ``loading.*`` keys (defaults, ranges, docs), the surface chemical potential mu_bar(t),
+an applied displacement in time, the kinks the stepper must not step across, the Dirichlet and no-flux
+conditions by boundary role (:class:`BoundaryConditions`), whether the permeable surface carries the
+term mu_bar dQ.n, what the history records as applied_strain, and what it needs from the geometry (e.g.
+a boundary to move: ``GeometryKind.provides``). The problem turns the conditions into dolfinx objects;
+nothing here knows about meshes. A new loading: a subclass and one line in :data:`LOADINGS`' registration
+at the end of this file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from app.geometry.base import HELD_COMPONENTS, Drive
+from app.registry import Registry
+from app.schema import Key, gt, in_closed, in_open, key
+
+
+@dataclass(frozen=True)
+class BoundaryConditions:
+    """The conditions of a loading on named facet groups."""
+
+    held: tuple[tuple[str, ...], ...]  # per displacement component: facet groups where it is zero
+    driven: Drive | None = None  # the facet group whose component follows applied_displacement(t)
+    flux_open: tuple[str, ...] | None = ()  # groups free of the no-flux condition (every other exterior facet
+    # has zero normal flux); None: diffusion off, every flux dof zero (s stays s0)
+
+
+class Loading:
+    """One value of ``loading.kind``; an instance is the loading of one run."""
+
+    name: ClassVar[str] = ""
+    keys: ClassVar[dict[str, Key]] = {}  # loading.* keys it reads
+    needs: ClassVar[frozenset[str]] = frozenset()  # what the geometry kind must provide
+    surface_term: ClassVar[bool] = True  # the permeable surface carries mu_bar dQ.n
+
+    def __init__(self, params: dict, *, mu_start: float, end_time: float, drive: Drive | None = None):
+        """``params``: this loading's keys; ``mu_start``: mu0 of the material under the permeable surface
+        (the surface starts in equilibrium with it); ``drive``: the geometry's movable boundary."""
+        self.params = {k: params[k] for k in self.keys}
+        self.mu_start, self.end_time, self.drive = mu_start, end_time, drive
+
+    @classmethod
+    def from_config(cls, cfg: dict, *, mu_start: float, drive: Drive | None = None) -> Loading:
+        lo = cfg["loading"]
+        return LOADINGS.get(lo["kind"])(lo, mu_start=mu_start, end_time=cfg["time"]["end"], drive=drive)
+
+    @property
+    def kind(self) -> str:
+        return self.name
+
+    def mu_bar(self, t: float) -> float:
+        """Chemical potential imposed on the permeable surface [MPa]."""
+        raise NotImplementedError
+
+    def applied_strain(self, t: float) -> float:
+        """What the history records as applied_strain."""
+        return 0.0
+
+    def applied_displacement(self, t: float) -> float:
+        """Displacement of the driven boundary's component [mm]."""
+        return 0.0
+
+    def kinks(self) -> list[float]:
+        """Times where the load rate jumps: steps must not cross them."""
+        return []
+
+    def conditions(self, boundaries: dict[str, str]) -> BoundaryConditions:
+        """Dirichlet and no-flux conditions for facet groups with roles (``GeometrySetup.boundaries``):
+        every role holds its components (``HELD_COMPONENTS``), fluid passes the permeable ones only."""
+        return BoundaryConditions(_held(boundaries), None, _with_role(boundaries, "permeable"))
+
+
+def _with_role(boundaries: dict[str, str], *roles: str) -> tuple[str, ...]:
+    return tuple(g for g, role in boundaries.items() if role in roles)
+
+
+def _held(boundaries: dict[str, str], except_: tuple[str, int] | None = None) -> tuple[tuple[str, ...], ...]:
+    return tuple(tuple(g for g, role in boundaries.items()
+                       if c in HELD_COMPONENTS.get(role, ()) and (g, c) != except_) for c in (0, 1))
+
+
+RAMP_KEYS = {
+    "chemical_potential": key(float, 0.0, in_closed(-1000.0, 0.0), "mu_bar after the ramp [MPa]", unit="MPa"),
+    "ramp_time": key(float, 1.0, gt(0), "[s]", unit="s"),
+}
+
+
+class RampedSurface(Loading):
+    """The surface chemical potential rises linearly from the surface material's mu0 to
+    ``chemical_potential`` in ``ramp_time`` and is then held."""
+
+    keys = RAMP_KEYS
+
+    def mu_bar(self, t: float) -> float:
+        frac = min(max(t / self.params["ramp_time"], 0.0), 1.0)
+        return self.mu_start + (self.params["chemical_potential"] - self.mu_start) * frac
+
+
+class Swelling(RampedSurface):
+    """The paper's loading: the ramp acts on the permeable surface, where fluid enters; steps do not cross
+    the end of the ramp."""
+
+    name = "swelling"
+
+    def kinks(self) -> list[float]:
+        return [self.params["ramp_time"]]
+
+
+class Compression(RampedSurface):
+    """A purely mechanical check case: diffusion off (every flux dof zero, s = s0) and the geometry's driven
+    boundary moved to -compression_strain * length linearly in time (``time.end``). mu_bar(t) is the ramp,
+    recorded in the history only: it does not act (no surface term)."""
+
+    name = "compression"
+    keys = {**RAMP_KEYS, "compression_strain": key(float, 0.1, in_open(0.0, 0.9), "compression loading only")}
+    needs = frozenset({"drive"})
+    surface_term = False
+
+    def applied_strain(self, t: float) -> float:
+        return self.params["compression_strain"] * min(t / self.end_time, 1.0)
+
+    def applied_displacement(self, t: float) -> float:
+        return -self.applied_strain(t) * self.drive.length
+
+    def conditions(self, boundaries: dict[str, str]) -> BoundaryConditions:
+        d = self.drive
+        return BoundaryConditions(_held(boundaries, except_=(d.group, d.component)), d, None)
+
+
+LOADINGS: Registry[type[Loading]] = Registry("loading")
+for _loading in (Swelling, Compression):  # registration order = the order docs list them
+    LOADINGS.register(_loading)
+DEFAULT_LOADING = "swelling"
