@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import ufl
 from mpi4py import MPI
+from scipy.optimize import brentq
 
 from app import compat, config
 from app.model.hydrogel import HYDROGEL, Hydrogel
@@ -95,11 +96,12 @@ def test_theory_piola_equals_the_law_derivative():
         mat = Hydrogel(gamma, 24.2, eps, 1e-4, 1.01, 0.1)
         for e in (1e-5, -0.03, 0.1):
             pxx = _undrained_pxx(mat, e)  # at the l with P_yy = 0
-            from scipy.optimize import brentq
-
             a = 1 + e
-            lam = brentq(lambda l_: first_piola(mat, np.diag([a, l_]), mat.s0)[1, 1], 0.2, 5.0, xtol=1e-15,
-                         rtol=1e-15)
+
+            def pyy(l_, mat=mat, a=a):
+                return first_piola(mat, np.diag([a, l_]), mat.s0)[1, 1]
+
+            lam = brentq(pyy, 0.2, 5.0, xtol=1e-15, rtol=1e-15)
             P = first_piola(mat, np.diag([a, lam]), mat.s0)
             assert pxx == pytest.approx(P[0, 0], rel=1e-9, abs=1e-13)  # the same root, found twice
             assert abs(P[0, 1]) < 1e-14 and abs(P[1, 0]) < 1e-14

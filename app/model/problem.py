@@ -84,9 +84,11 @@ class Problem:
         self.ds = ufl.Measure("ds", domain=domain, subdomain_data=self.tm.facet_tags)
         permeable = [self.tm.facet_names[g] for g in self.geo.facets_with_role("permeable")]
         self.ds_permeable = self.ds(tuple(permeable))
+        # where the loading's surface term mu_bar dQ.n acts (None: nowhere)
+        self.surface_measure = self.ds_permeable if loading.surface_term else None
 
-        self.pot = build(self.w, self.state, self.mat, self.tau, self.mu_bar, self.dx,
-                         self.ds_permeable if loading.surface_term else None, self.dx_coupling)
+        self.pot = build(self.w, self.state, self.mat, self.tau, self.mu_bar, self.dx, self.surface_measure,
+                         self.dx_coupling)
         self.forms = CompiledForms(self.pot)
         self.bcs, self._driven = self._boundary_conditions(loading.conditions(self.geo.boundaries))
         self._observables()
@@ -95,8 +97,11 @@ class Problem:
 
     def _material_fields(self) -> MaterialFields:
         """The law's parameters and s0 as per-cell (DG0) fields, each cell carrying its layer's values."""
+        laws = {mat.law for mat in self.materials.values()}
+        if len(laws) != 1:
+            raise ValueError("every layer's material must follow one material law")
+        law = laws.pop()
         V0 = compat.scalar_space(self.domain, "DG", 0)
-        law = next(iter(self.materials.values())).law
         fields = {}
         for name in (*law.params, "s0"):
             f = compat.Function(V0)
