@@ -103,12 +103,9 @@ def on_rank0(fn, *args, **kwargs):
         for r in range(1, comm.size):
             comm.send(payload, dest=r, tag=77)
     else:
-        req = comm.irecv(source=0, tag=77)
-        while True:
-            done, payload = req.test()
-            if done:
-                break
+        while not comm.iprobe(source=0, tag=77):  # wait without spinning in MPI
             time.sleep(0.05)
+        payload = comm.recv(source=0, tag=77)  # any size (irecv's default buffer is 32 kB)
     ok, value = payload
     if not ok:
         raise value
