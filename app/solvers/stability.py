@@ -37,8 +37,18 @@ class Eigenpair:
     vector: np.ndarray  # local array (owned + ghosts) in the mixed space W
 
 
-def zero_increment_hessian(problem, tau: float):
-    """K of the problem's incremental potential on coefficients of its own: (form, work, state, tau).
+@dataclass
+class OwnHessian:
+    """A compiled Hessian form and the coefficients it is evaluated on, owned by its user."""
+
+    form: object
+    work: object  # (u, dQ): the increment K is evaluated at
+    state: object  # (u_n, Q_n): the previous state
+    tau: object  # Constant: the step in the dissipation block
+
+
+def zero_increment_hessian(problem, tau: float) -> OwnHessian:
+    """K of the problem's incremental potential on coefficients of its own.
 
     ``work`` is the (u, dQ) the Hessian is evaluated at and ``state`` the previous state (u_n, Q_n),
     both refreshed from the problem's converged state before each assembly; the material fields are
@@ -57,7 +67,7 @@ def zero_increment_hessian(problem, tau: float):
     mu_bar = compat.Constant(p.domain, compat.ScalarType(0.0))  # does not enter K (linear in dQ)
     surface = p.ds_permeable if p.loading.kind == "swelling" else None
     pot = build(work, state, type(p.mat)(**fields), tau_c, mu_bar, p.dx, surface, p.dx_coupling)
-    return compat.form(pot.hessian), work, state, tau_c
+    return OwnHessian(compat.form(pot.hessian), work, state, tau_c)
 
 
 class StabilityAnalyzer:
@@ -66,13 +76,12 @@ class StabilityAnalyzer:
     Built from that form, the Dirichlet conditions and the state it reads (never writes); use
     :meth:`for_problem`."""
 
-    def __init__(self, hessian, work, state_copy, tau_const, tau: float, source_state, u_dofs, bcs, comm):
-        self.hessian, self.work, self.state_copy, self.tau_const = hessian, work, state_copy, tau_const
-        self.tau = tau
+    def __init__(self, k: OwnHessian, tau: float, source_state, u_dofs, bcs, comm):
+        self.k, self.tau = k, tau
         self.source = source_state  # the converged state the tests are about (read only)
         self.u_dofs, self.bcs, self.comm = u_dofs, bcs, comm
-        self.W = work.function_space
-        self.A = compat.create_matrix(hessian)
+        self.W = k.work.function_space
+        self.A = compat.create_matrix(k.form)
         self.is_free = self._free_index_set()
         self.Kf = None
         self._ksp = None
@@ -84,8 +93,7 @@ class StabilityAnalyzer:
     @classmethod
     def for_problem(cls, problem, tau: float) -> StabilityAnalyzer:
         """The analyzer of a problem's converged state (``problem.state``), with step ``tau`` in K."""
-        hessian, work, state_copy, tau_const = zero_increment_hessian(problem, tau)
-        return cls(hessian, work, state_copy, tau_const, tau, problem.state, problem.u_dofs, problem.bcs,
+        return cls(zero_increment_hessian(problem, tau), tau, problem.state, problem.u_dofs, problem.bcs,
                    problem.comm)
 
     def _free_index_set(self) -> PETSc.IS:
@@ -98,16 +106,16 @@ class StabilityAnalyzer:
     def _set_zero_increment(self) -> None:
         """Own coefficients at the converged state: (u, dQ) = (u_n, 0), tau = stability.tau."""
         s = self.source.x.array
-        self.state_copy.x.array[:] = s
-        w = self.work.x.array
+        self.k.state.x.array[:] = s
+        w = self.k.work.x.array
         w[:] = 0.0
         w[self.u_dofs] = s[self.u_dofs]
-        self.tau_const.value = self.tau
+        self.k.tau.value = self.tau
 
     def assemble(self) -> PETSc.Mat:
         """K at the current converged state, restricted to the free dofs."""
         self._set_zero_increment()
-        compat.assemble_matrix_into(self.A, self.hessian, self.bcs)
+        compat.assemble_matrix_into(self.A, self.k.form, self.bcs)
         if self.Kf is None:
             self.Kf = self.A.createSubMatrix(self.is_free, self.is_free)
         else:
