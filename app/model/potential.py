@@ -20,8 +20,7 @@ from dataclasses import dataclass
 import ufl
 
 from app import compat
-from app.model import DEFAULT_LAW
-from app.model.material import LAWS, chemical_potential
+from app.model.material import chemical_potential
 
 
 @functools.cache
@@ -33,11 +32,6 @@ def fields_class(law) -> type:
                                      namespace={"law": law})
     cls.__module__ = __name__
     return cls
-
-
-# The default law's record, by name: app/solvers/stability.py copies the fields with
-# dataclasses.fields(MaterialFields); law-independent code uses type(problem.mat).
-MaterialFields = fields_class(LAWS.get(DEFAULT_LAW))
 
 
 @dataclass

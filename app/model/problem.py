@@ -17,7 +17,7 @@ from app import compat, config, geometry
 from app.geometry import GeometrySetup
 from app.model.loading import BoundaryConditions, Loading
 from app.model.material import Material
-from app.model.potential import CompiledForms, MaterialFields, build, fields_class
+from app.model.potential import CompiledForms, build, fields_class
 
 
 @dataclass(frozen=True)
@@ -95,7 +95,7 @@ class Problem:
 
     # --- setup helpers ---------------------------------------------------------------------
 
-    def _material_fields(self) -> MaterialFields:
+    def _material_fields(self):
         """The law's parameters and s0 as per-cell (DG0) fields, each cell carrying its layer's values."""
         laws = {mat.law for mat in self.materials.values()}
         if len(laws) != 1:
