@@ -65,8 +65,7 @@ def zero_increment_hessian(problem, tau: float) -> OwnHessian:
         fields[f.name].x.array[:] = source.x.array
     tau_c = compat.Constant(p.domain, compat.ScalarType(tau))
     mu_bar = compat.Constant(p.domain, compat.ScalarType(0.0))  # does not enter K (linear in dQ)
-    surface = p.ds_permeable if p.loading.kind == "swelling" else None
-    pot = build(work, state, type(p.mat)(**fields), tau_c, mu_bar, p.dx, surface, p.dx_coupling)
+    pot = build(work, state, type(p.mat)(**fields), tau_c, mu_bar, p.dx, p.surface_measure, p.dx_coupling)
     return OwnHessian(compat.form(pot.hessian), work, state, tau_c)
 
 
