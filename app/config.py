@@ -112,7 +112,9 @@ def _laws():
 
 def law(cfg: dict):
     """The material law of a resolved config."""
-    return _laws().get(cfg["material"]["law"])
+    from app import model
+
+    return _laws().get(cfg["material"].get("law") or model.DEFAULT_LAW)
 
 
 def material_keys() -> dict[str, Key]:
@@ -132,7 +134,8 @@ def _material_table() -> dict:
 
     params = material_keys()
     return {
-        "law": _key(str, model.DEFAULT_LAW, _one_of(*_laws().names()), "the material law of every layer"),
+        "law": _key(str, None, _one_of(*_laws().names()),
+                    f"the material law of every layer (unset: {model.DEFAULT_LAW!r})", optional=True),
         **params,
         "layers": _key(dict, None, None, "msh: more named layer materials, each like [material.film]",
                        optional=True),

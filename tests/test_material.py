@@ -125,7 +125,8 @@ def test_one_parameter_declaration_feeds_config_record_and_summary():
     Material record, and what the summary lists per material."""
     assert LAWS.get("hydrogel") is HYDROGEL
     cfg = config.resolve({})
-    assert cfg["material"]["law"] == "hydrogel"
+    assert cfg["material"]["law"] is None and config.law(cfg) is HYDROGEL  # unset: the default law
+    assert config.law(config.resolve({"material": {"law": "hydrogel"}})) is HYDROGEL
     for name, key in HYDROGEL.params.items():
         assert config.SCHEMA["material"][name] is key
         assert cfg["material"][name] == key.default

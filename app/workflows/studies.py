@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from app import config, logging_setup
+from app.workflows.variants import variant
 
 COMPLETE = ("buckled", "stable")
 ISOMODE_CROSSINGS = 6  # later crossings tracked per case for isomode curves
@@ -111,19 +112,18 @@ def build_cases(base_cfg_user: dict, param: str, values: list, outdir: Path, ove
                 cfg = config.resolve(copy.deepcopy(base_cfg_user), items)
             except config.ConfigError as err:
                 raise config.ConfigError("", f"{err} (case {param} = {_format_value(v)})") from None
+            changes = {"stability.error_estimate": error_estimate}
             if scale_mesh_with_film and param == "geometry.film_thickness":
                 # keep film elements' shape: element length along the film <= f w, f the kind's (bilayer 0.4, tubes 0.5)
                 from app import geometry
 
                 f = geometry.kind_of(cfg).film_element_fraction
                 if f is not None:
-                    cfg["mesh"]["element_size"] = min(cfg["mesh"]["element_size"], f * v)
-            cfg["output"]["fields"] = False
-            cfg["stability"]["error_estimate"] = error_estimate
+                    changes["mesh.element_size"] = min(cfg["mesh"]["element_size"], f * v)
             if isomodes:
-                cfg["stability"]["stop_at_onset"] = False
-                cfg["stability"]["max_crossings"] = min(cfg["stability"]["max_crossings"], ISOMODE_CROSSINGS)
-            config.validate(cfg)
+                changes["stability.stop_at_onset"] = False
+                changes["stability.max_crossings"] = min(cfg["stability"]["max_crossings"], ISOMODE_CROSSINGS)
+            cfg = variant(cfg, changes)
             label = (f"{s_label}_" if s_label else "") + f"{param.split('.')[-1]}={_format_value(v)}"
             cases.append(Case(label, s_label, v, cfg, outdir / label))
     return cases
