@@ -41,6 +41,9 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
         "tolerance": _key(float, 5.0e-4, _gt(0), "local error tolerance (fluid content) of the adaptive step"),
         "adaptive": _key(bool, True, None, "false: fixed steps of dt_initial (cut back only on divergence)"),
         "max_steps": _key(int, 100000, _ge(1)),
+        "stop_at_equilibrium": _key(float, 0.0, _ge(0.0),
+                                    "end the run (status equilibrium) once the relative fluid uptake rate "
+                                    "|dV/dt| t / |V - V(0)| after the last loading kink is below this; 0 = off"),
     },
     "solver": {
         "rtol": _key(float, 1.0e-9, _in_open(0.0, 1.0), "Newton relative residual tolerance"),

@@ -117,8 +117,10 @@ class OnsetTracker:
     # --- the summary's stability entries -----------------------------------------------------
 
     def status(self, status: str) -> str:
-        """A run that did not fail is "buckled" or "stable"."""
-        return status if status == "failed" else ("buckled" if self.crossings else "stable")
+        """A run that did not fail is "buckled", else "equilibrium" (time.stop_at_equilibrium) or "stable"."""
+        if status == "failed":
+            return status
+        return "buckled" if self.crossings else ("equilibrium" if status == "equilibrium" else "stable")
 
     def onset_summary(self) -> dict:
         c = self.crossings

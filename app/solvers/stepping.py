@@ -37,12 +37,13 @@ class TimeSettings:
     tolerance: float
     adaptive: bool = True
     max_steps: int = 100000
+    stop_at_equilibrium: float = 0.0  # threshold of the relative uptake rate (0 = off)
 
     @classmethod
     def from_config(cls, cfg: dict) -> TimeSettings:
         t = cfg["time"]
         return cls(t["end"], t["dt_initial"], t["dt_min"], t["dt_max"], t["tolerance"], t["adaptive"],
-                   t["max_steps"])
+                   t["max_steps"], t.get("stop_at_equilibrium", 0.0))
 
     def step_control(self) -> StepControl:
         return StepControl(self.tolerance, self.dt_min, self.dt_max, self.adaptive, self.dt_initial)
@@ -109,6 +110,10 @@ class TimeStepper:
         self.dt_next = time.dt_initial
         self.rejected = 0
         self.failed_solves = 0
+        self.equilibrium_threshold = time.stop_at_equilibrium
+        self._volume = None  # (t, fluid volume) of the last record seen by at_equilibrium
+        self._volume0 = None
+        self.uptake_rate = float("nan")  # the last relative uptake rate at_equilibrium computed
         self._setup_error_form()
 
     # --- error estimate --------------------------------------------------------------------
@@ -210,6 +215,27 @@ class TimeStepper:
                 continue
             break
         return self._accept(dt, res.iterations, err)
+
+    def at_equilibrium(self, rec: StepRecord) -> bool:
+        """time.stop_at_equilibrium: whether the run has reached its equilibrium with the held loading.
+
+        The relative fluid uptake rate r = |dV/dt| t / |V - V(0)| (dV/dt over the last accepted step,
+        V the fluid volume, t the elapsed time) is below the threshold, after the last loading kink.
+        For an exponential approach V_inf - V ~ exp(-t/T), the uptake still missing is r T/t, less than
+        r of the uptake once t > T. Call it with every record of the run, the initial one first."""
+        if self._volume0 is None:
+            self._volume0 = rec.fluid_volume
+        prev, self._volume = self._volume, (rec.time, rec.fluid_volume)
+        if self.equilibrium_threshold <= 0 or prev is None or rec.time <= prev[0]:
+            return False
+        if self.kinks and rec.time < self.kinks[-1] * (1 + 1e-12):
+            return False
+        uptake = abs(rec.fluid_volume - self._volume0)
+        if uptake == 0.0:
+            return False
+        rate = abs(rec.fluid_volume - prev[1]) / (rec.time - prev[0]) * rec.time / uptake
+        self.uptake_rate = rate
+        return rate < self.equilibrium_threshold
 
     def _accept(self, dt: float, its: int, err: float) -> StepRecord:
         p = self.p

@@ -80,6 +80,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     tracker.start(first)
     writer.history_row(row_of(first))
     writer.write_fields(0.0)
+    stepper.at_equilibrium(first)
     status, message = "completed", ""
     try:
         while not stepper.done():
@@ -89,6 +90,12 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
             writer.history_row(row_of(rec))
             detail(progress_line(rec))
             if tracker.resolve():
+                break
+            if stepper.at_equilibrium(rec):
+                status = "equilibrium"
+                message = (f"equilibrium at t = {rec.time:.6g} s: relative fluid uptake rate {stepper.uptake_rate:.3g} "
+                           f"< time.stop_at_equilibrium = {settings.time.stop_at_equilibrium:g}")
+                log.info(f"hydrobuckle: {message}")
                 break
     except StepFailure as err:
         status, message = "failed", str(err)
