@@ -39,6 +39,11 @@ class SolverSettings:
                    s["ksp_max_it"])
 
 
+ROUNDOFF_UPDATE = 1e3 * np.finfo(float).eps  # a Newton update below this times |x| is at roundoff
+STAGNATION = 0.5  # a residual that falls by less than this factor in one iteration has stagnated
+DIVTOL = 1e4  # PETSc's default divergence tolerance (SNESConvergedDefault's DIVERGED_DTOL)
+
+
 @dataclass
 class NewtonResult:
     converged: bool
@@ -83,11 +88,15 @@ class NewtonSolver:
         self.linear = linear
         self.last_iterations = 0
         self.linear_iterations = 0  # Krylov iterations of all solves (iterative mode)
+        self._tol = (settings.rtol, settings.atol, 100 * settings.max_it)
+        self.residual_scale = None  # the initial residual norm of the first solve: the problem's scale
+        self.floor_accepted = 0  # solves accepted by the roundoff-floor rule (see _converged)
         self.snes = PETSc.SNES().create(comm)
         self.snes.setOptionsPrefix(self.prefix)
         self.snes.setFunction(self._residual, self.b)
         self.snes.setJacobian(self._jacobian, self.A)
         self.snes.setFromOptions()
+        self.snes.setConvergenceTest(self._converged)
         ksp = self.snes.getKSP()
         ksp.setFromOptions()
         if linear == "iterative":
@@ -145,6 +154,44 @@ class NewtonSolver:
         scale = float(np.max(np.abs(g.array[idx]))) if idx.size else 0.0
         comm = self.comm
         return comm.allreduce(local, op=MPI.MAX) > 1e-13 * max(1.0, comm.allreduce(scale, op=MPI.MAX))
+
+    def _converged(self, snes, it, norms):
+        """PETSc's default test (SNESConvergedDefault with stol = 0), in the same order, plus one
+        acceptance it lacks: a residual at its roundoff floor is converged.
+
+        Default: converged if |R| < atol or (it > 0 and) |R| <= rtol |R_0| (R_0: this step's initial
+        residual); diverged on NaN, too many function evaluations or |R| > 1e4 |R_0|. Near equilibrium
+        |R_0| is tiny and rtol |R_0| can lie below roundoff; then a converged state would iterate to
+        max_it and be cut back. So (it > 0) the iterate is also converged if the Newton update is at
+        roundoff (|dx| <= 1e3 eps |x|), or if the residual stagnated (fell by less than 2 in the last
+        iteration) at a level below rtol times the problem's scale (the initial residual norm of the
+        solver's first solve, the run's first step). Normal steps converge by the default rules first,
+        with their iteration counts unchanged."""
+        xnorm, ynorm, fnorm = norms
+        rtol, atol, max_funcs = self._tol
+        if it == 0:
+            self._ttol, self._rnorm0 = fnorm * rtol, fnorm
+            if self.residual_scale is None and np.isfinite(fnorm) and fnorm > 0:
+                self.residual_scale = float(fnorm)
+        reason = PETSc.SNES.ConvergedReason
+        out = reason.CONVERGED_ITERATING
+        if not np.isfinite(fnorm):
+            out = reason.DIVERGED_FNORM_NAN
+        elif fnorm < atol:
+            out = reason.CONVERGED_FNORM_ABS
+        elif snes.getFunctionEvaluations() >= max_funcs:
+            out = reason.DIVERGED_FUNCTION_COUNT
+        if it and out == reason.CONVERGED_ITERATING:
+            scale = self.residual_scale or 0.0
+            if fnorm <= self._ttol:
+                out = reason.CONVERGED_FNORM_RELATIVE
+            elif ynorm <= ROUNDOFF_UPDATE * xnorm or (fnorm <= rtol * scale and fnorm > STAGNATION * self._fprev):
+                out = reason.CONVERGED_SNORM_RELATIVE
+                self.floor_accepted += 1
+            elif fnorm > DIVTOL * self._rnorm0:
+                out = reason.DIVERGED_DTOL
+        self._fprev = fnorm
+        return out
 
     def _jacobian(self, snes, x, J, P):
         with timing.timed("assembly"):
