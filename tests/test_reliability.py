@@ -11,11 +11,13 @@ import csv
 import json
 
 import pytest
+from cases import swelling_case
 
 from app import config
 from app.model.problem import Problem
 from app.model.theory import constrained_layer_stretch
 from app.solvers import newton, stepping
+from app.solvers.stability import StabilityAnalyzer
 from app.workflows.run import simulate
 
 H = 0.01  # layer thickness [mm]: substrate 0.005 + film 0.005 of the same material
@@ -109,3 +111,64 @@ def test_residual_at_roundoff_floor_is_converged(comm, monkeypatch):
     _, rows0, failure0, failed0, floor0 = _near_equilibrium_run(comm, False, monkeypatch)
     assert floor0 == 0 and failed0 > 0 and failure0 is not None  # the default test alone fails
     assert rows0[-1].time < 1e7
+
+
+def test_failing_steps_past_the_onset_are_diagnosed_not_cut_to_dt_min(comm, shared_tmp, monkeypatch):
+    """The small swelling bilayer with the stability test off, run past its onset (t_c < 1 s): the
+    fundamental path is followed until Newton fails near t = 2.48 s. Without the diagnosis the step
+    is cut back 19 times to dt_min; with it the run stops after 2 failed attempts of that step with
+    status "failed", the diagnosis in summary.json's message, and the history up to there kept.
+    The negative eigenvalues are confirmed by an independent exact inertia test of K at the last
+    accepted state (as the stability test does it)."""
+    cfg = swelling_case("stability.enabled=false", "time.end=3.0")
+    counts = {}
+    real = stepping.TimeStepper._diagnose
+
+    def spy(self, dt, reason, failures):
+        counts["failures"], counts["t"], counts["tau"] = failures, self.t, dt
+        analyzer = StabilityAnalyzer.for_problem(self.p, dt)
+        counts["nneg"] = analyzer.inertia()[0]
+        analyzer.destroy()
+        real(self, dt, reason, failures)
+
+    monkeypatch.setattr(stepping.TimeStepper, "_diagnose", spy)
+    simulate(cfg, shared_tmp, comm, progress=False)
+    summary, rows = _read(shared_tmp)
+    assert summary["status"] == "failed"
+    msg = summary["message"]
+    assert msg.startswith("the state lost stability at t = ")
+    assert "the fundamental path cannot be followed" in msg and "stability.enabled = true" in msg
+    assert counts["failures"] <= 3 and f"Newton failed {counts['failures']} times on this step" in msg
+    assert counts["nneg"] > 0 and f"K has {counts['nneg']} negative eigenvalue(s)" in msg
+    assert 1.0 < summary["final"]["time"] < 3.0
+    assert float(rows[-1]["time"]) == pytest.approx(counts["t"]) == pytest.approx(summary["final"]["time"])
+    assert len(rows) == summary["steps"] + 1 > 50  # the history up to the failure is kept
+    assert summary["failed_solves"] <= 10  # measured 8 (6 single failures recovered by one cut-back)
+
+
+def test_diagnosis_lets_the_cut_back_go_on_where_K_is_positive_definite(comm, monkeypatch):
+    """A step that fails twice while K is positive definite is cut back further as before."""
+
+    class FakeResult:
+        converged, iterations, reason, residual_norm = False, 25, -5, 1.0
+
+    cfg = _layer(0.5, 0.4, end=1.0)
+    p = Problem.from_config(cfg, comm)
+    from app.workflows.run import RunSettings
+
+    s = RunSettings.from_config(cfg)
+    st = stepping.TimeStepper(p, s.time, s.solver)
+    calls = []
+    real_attempt = st.attempt
+
+    def attempt(dt):
+        calls.append(dt)
+        if len(calls) <= 3:  # three failures in a row, then the real solve
+            return FakeResult(), float("nan")
+        return real_attempt(dt)
+
+    st.attempt = attempt
+    rec = st.advance()
+    st.destroy()
+    assert rec.step == 1 and st.failed_solves == 3
+    assert calls[:4] == pytest.approx([0.01, 0.0025, 0.000625, 0.00015625])

@@ -53,6 +53,11 @@ class StepFailure(RuntimeError):
     """The step could not be completed even at the smallest allowed step size."""
 
 
+class LostStability(StepFailure):
+    """Newton failed twice in a row for the same reason and K at the last converged state is
+    indefinite: the fundamental path cannot be followed (see :meth:`TimeStepper.advance`)."""
+
+
 @dataclass
 class StepRecord:
     step: int
@@ -195,11 +200,17 @@ class TimeStepper:
             raise StepFailure(f"time.max_steps = {self.max_steps} reached at t = {self.t:.6g} s")
         control = self.control
         dt = control.first_try(self.dt_next)
+        last_reason, diagnosed, failures = None, False, 0
         while True:
             dt = self._clip(dt, until)
             res, err = self.attempt(dt)
             if not res.converged:
                 self.failed_solves += 1
+                failures += 1
+                if res.reason == last_reason and not diagnosed:
+                    diagnosed = True
+                    self._diagnose(dt, res.reason, failures)
+                last_reason = res.reason
                 new_dt = control.cut_back(dt)
                 self.log(f"  Newton did not converge (reason {res.reason}) at t = {self.t + dt:.6g} s, "
                          f"dt = {dt:.3g} s: cutting back to {new_dt:.3g} s")
@@ -215,6 +226,28 @@ class TimeStepper:
                 continue
             break
         return self._accept(dt, res.iterations, err)
+
+    def _diagnose(self, dt: float, reason: int, failures: int) -> None:
+        """After a step failed at 4 dt and again at dt for the same reason: the inertia of K at the
+        last converged state with the failing step's tau = dt (dissipation block included, Dirichlet
+        dofs removed). Negative eigenvalues mean the state has lost stability and no smaller step
+        can follow the fundamental path: raise :class:`LostStability` instead of cutting back to
+        dt_min. A positive definite K lets the cut-back go on."""
+        from app.solvers.stability import StabilityAnalyzer
+
+        analyzer = StabilityAnalyzer.for_problem(self.p, dt)
+        try:
+            nneg = analyzer.inertia()[0]
+        finally:
+            analyzer.destroy()
+        self.log(f"  two failures in a row (SNES reason {reason}): K at t = {self.t:.6g} s with tau = {dt:.3g} s "
+                 f"has {nneg} negative eigenvalue(s)")
+        if nneg > 0:
+            raise LostStability(
+                f"the state lost stability at t = {self.t:.6g} s (K has {nneg} negative eigenvalue(s) with tau = "
+                f"{dt:.3g} s; Newton failed {failures} times on this step, the last two with SNES reason {reason}): "
+                f"the fundamental path cannot be followed; enable the stability test (stability.enabled = true) "
+                f"to locate the onset and its mode (hydrobuckle does not follow post-buckling paths)")
 
     def at_equilibrium(self, rec: StepRecord) -> bool:
         """time.stop_at_equilibrium: whether the run has reached its equilibrium with the held loading.
