@@ -1,7 +1,8 @@
 """Command line: ``hydrobuckle run|validate|version``.
 
 Exit codes: 0 success, 1 solver failure (summary.json says "failed", history kept),
-2 bad input (one line naming the key and the allowed range; no result directory is created).
+2 bad input (one line naming the key and the allowed range; no result directory is created),
+130 / 143 interrupted by SIGINT / SIGTERM (summary.json says "interrupted", history kept).
 """
 
 from __future__ import annotations
@@ -349,7 +350,10 @@ COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version, "c
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    return COMMANDS[args.command](args)
+    code = COMMANDS[args.command](args)
+    from app import interrupt
+
+    return interrupt.exit_code() or code  # 130 / 143 after SIGINT / SIGTERM (status "interrupted")
 
 
 if __name__ == "__main__":

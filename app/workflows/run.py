@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 from dataclasses import asdict, dataclass
 
-from app import logging_setup, timing
+from app import interrupt, logging_setup, timing
 from app.io.output import OutputSettings, ResultWriter, versions
 from app.model.problem import Problem
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
@@ -65,12 +65,14 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     settings = RunSettings.from_config(cfg)
     columns = StepRecord.COLUMNS + (OnsetTracker.COLUMNS if settings.stability.enabled else ())
     writer = ResultWriter(outdir, comm, cfg, settings.output, columns=columns)
+    watch = interrupt.Watch(comm).__enter__()  # SIGINT/SIGTERM: recorded, acted on between steps
     with timing.timed("setup"):
         if problem is None:
             problem = Problem.from_config(cfg, comm)
         stepper = TimeStepper(problem, settings.time, settings.solver, log=log.info)
         tracker = onset_tracker(problem, stepper, settings.stability, log=log.info, detail=detail,
                                 on_first_crossing=lambda crossing: writer.write_mode(problem, crossing))
+    watch.arm()  # gmsh reset SIGINT's handler
     mats = problem.materials
     log.info(f"hydrobuckle: {cfg['geometry']['kind']} mesh with {problem.cells()} cells, {problem.dofs()} dofs "
              f"on {comm.size} rank(s); film mu0 = {mats['film'].mu0:.4f} MPa, "
@@ -84,6 +86,12 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     status, message = "completed", ""
     try:
         while not stepper.done():
+            if sig := watch.requested():  # collective: every rank leaves after the same step
+                status = "interrupted"
+                message = (f"interrupted by {interrupt.name(sig)} at t = {writer.rows[-1]['time']:.6g} s "
+                           f"after {stepper.step} steps")
+                log.info(f"hydrobuckle: {message}")
+                break
             rec = stepper.advance()
             writer.write_fields(rec.time, rec.step)
             tracker.test(rec)
@@ -100,12 +108,15 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     except StepFailure as err:
         status, message = "failed", str(err)
         log.info(f"hydrobuckle: solver failure: {message}")
-    summary = summarize(tracker.status(status), message, writer.rows[-1], problem, stepper, tracker, settings,
-                        cfg, time.perf_counter() - wall0)
+    finally:
+        watch.__exit__()
+    summary = summarize(status if status == "interrupted" else tracker.status(status), message, writer.rows[-1],
+                        problem, stepper, tracker, settings, cfg, time.perf_counter() - wall0)
     writer.close()
     stepper.destroy()
     tracker.destroy()
-    writer.plot_history(summary.get("critical"))
+    if status != "interrupted":  # under mpirun the ranks have 1 s after a SIGTERM (docs/reliability.md)
+        writer.plot_history(summary.get("critical"))
     last = summary["final"]
     log.info(f"hydrobuckle: {summary['status']} after {stepper.step} steps, t = {last['time']:.5g} s, "
              f"growth = {1e3 * last['growth_mm']:.4f} um, wall {summary['wall_time_s']:.1f} s -> {outdir}")

@@ -1,0 +1,68 @@
+"""SIGINT / SIGTERM during a run (Ctrl-C, a cluster's wall-time limit): the handler only records the
+signal; the run loop asks :meth:`Watch.requested` after every step, collectively (an allreduce), so all
+ranks leave the loop after the same step and none waits in a collective the others have left. A second
+signal of the same kind while the first is handled acts as without hydrobuckle (ends the process at once).
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+
+EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + signal number, as a shell reports it
+
+_received = 0  # the signal this process received and has not yet agreed on (0: none)
+agreed = 0  # the signal the ranks agreed on in the last check that found one (0: none); read by the CLI
+
+
+def _handler(signum, frame) -> None:
+    global _received
+    _received = max(_received, signum)
+    signal.signal(signum, signal.SIG_DFL)  # a second signal ends the process as usual
+
+
+class Watch:
+    """Context manager: installs the handlers (main thread only) and restores the previous ones."""
+
+    def __init__(self, comm):
+        self.comm = comm
+        self._old = {}
+
+    def __enter__(self) -> Watch:
+        return self.arm()
+
+    def arm(self) -> Watch:
+        """(Re)install the handlers: gmsh.initialize/finalize reset SIGINT's, so a run re-arms after meshing."""
+        if threading.current_thread() is threading.main_thread():
+            for sig in EXIT_CODES:
+                old = signal.signal(sig, _handler)
+                self._old.setdefault(sig, old)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old.clear()
+
+    def requested(self) -> int:
+        """Collective: the signal any rank received (SIGTERM before SIGINT), or 0."""
+        global agreed
+        sig = self.comm.allreduce(_received, op=_max())
+        if sig:
+            agreed = sig
+        return sig
+
+
+def _max():
+    from mpi4py import MPI
+
+    return MPI.MAX
+
+
+def name(sig: int) -> str:
+    return signal.Signals(sig).name
+
+
+def exit_code() -> int | None:
+    """The exit code of an interrupted command (130 SIGINT, 143 SIGTERM), or None."""
+    return EXIT_CODES.get(agreed) if agreed else None

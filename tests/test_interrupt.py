@@ -1,0 +1,118 @@
+"""SIGINT / SIGTERM during a run (docs/reliability.md): the run stops between steps, keeps
+history.csv, writes summary.json with status "interrupted" and exits 130 / 143. Under mpirun the
+signal goes to mpirun, which forwards it to every rank (Open MPI 4.1 kills them 1 s later)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import signal
+import subprocess
+import time
+
+from conftest import REPO, child_env, on_rank0
+
+EXE = str(REPO / ".venv" / "bin" / "hydrobuckle")
+# a tiny homogeneous layer under a slow ramp (no onset, no failure) and a far end time: it runs until stopped
+LONG = """
+[geometry]
+length = 0.1
+substrate_thickness = 0.05
+film_thickness = 0.01
+[mesh]
+element_size = 0.01
+film_layers = 2
+[time]
+end = 1000.0
+dt_initial = 0.001
+dt_max = 0.005
+[material.film]
+modulus_ratio = 1.0
+[loading]
+ramp_time = 1000.0
+[stability]
+enabled = false
+error_estimate = false
+[output]
+fields = false
+plot = false
+"""
+
+
+def _interrupt(cmd, out, sig, rows=5, timeout=300):
+    """Start ``cmd``, wait until history.csv has ``rows`` data rows, send ``sig``; the finished process."""
+    proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    hist = out / "history.csv"
+    t0 = time.monotonic()
+    try:
+        while not (hist.is_file() and len(hist.read_text().splitlines()) > rows):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() - t0 < timeout, "no history rows"
+            time.sleep(0.1)
+        proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return proc.returncode, stdout, stderr
+
+
+def _check_results(out, sig_name, ranks, rows=5):
+    summary = json.loads((out / "summary.json").read_text())
+    with open(out / "history.csv", newline="") as f:
+        reader = csv.DictReader(f)
+        table = list(reader)
+        columns = reader.fieldnames
+    assert summary["status"] == "interrupted"
+    assert summary["ranks"] == ranks
+    assert f"interrupted by {sig_name}" in summary["message"]
+    assert len(table) > rows
+    assert all(len(r) == len(columns) and None not in r.values() for r in table)  # no torn rows
+    times = [float(r["time"]) for r in table]
+    assert times == sorted(times) and times[0] == 0.0
+    assert [int(r["step"]) for r in table] == list(range(len(table)))
+    # the summary's final state is the last history row, named in the message
+    assert summary["steps"] == int(table[-1]["step"])
+    assert summary["final"]["time"] == float(table[-1]["time"])
+    assert f"t = {float(table[-1]['time']):.6g} s" in summary["message"]
+    return summary
+
+
+def test_sigint_serial_exits_130_with_history_and_summary(shared_tmp):
+    """Ctrl-C on a serial run: exit 130, status "interrupted", the rows up to the interruption."""
+    cfg = shared_tmp / "long.toml"
+    out = shared_tmp / "int"
+    on_rank0(cfg.write_text, LONG)
+    code, stdout, stderr = on_rank0(_interrupt, [EXE, "run", str(cfg), "-o", str(out)], out, signal.SIGINT)
+    assert code == 130, stdout[-2000:] + stderr[-2000:]
+    assert "Traceback" not in stderr
+    assert "hydrobuckle: interrupted by SIGINT" in stdout
+    _check_results(out, "SIGINT", ranks=1)
+
+
+def test_sigterm_serial_exits_143(shared_tmp):
+    """A wall-time limit's SIGTERM on a serial run: exit 143 (128 + 15)."""
+    cfg = shared_tmp / "long.toml"
+    out = shared_tmp / "term"
+    on_rank0(cfg.write_text, LONG)
+    code, stdout, stderr = on_rank0(_interrupt, [EXE, "run", str(cfg), "-o", str(out)], out, signal.SIGTERM)
+    assert code == 143, stdout[-2000:] + stderr[-2000:]
+    _check_results(out, "SIGTERM", ranks=1)
+
+
+def test_sigterm_to_mpirun_stops_both_ranks_collectively(shared_tmp):
+    """SIGTERM to `mpirun -n 2 hydrobuckle run`: Open MPI forwards it to both ranks, which agree
+    (allreduce) to stop after the same step, write summary.json ("interrupted") and exit 143 each.
+    mpirun itself reports 1 (Open MPI 4.1.4 exits 1 whenever it was signalled, whatever its ranks
+    returned), so the ranks' behaviour is asserted through their files."""
+    cfg = shared_tmp / "long.toml"
+    out = shared_tmp / "mpi"
+    on_rank0(cfg.write_text, LONG)
+    cmd = ["mpirun", "-n", "2", "--oversubscribe", EXE, "run", str(cfg), "-o", str(out)]
+    code, stdout, stderr = on_rank0(_interrupt, cmd, out, signal.SIGTERM)
+    assert code != 0, stdout[-2000:] + stderr[-2000:]
+    assert "Traceback" not in stderr
+    assert "hydrobuckle: interrupted by SIGTERM" in stdout
+    _check_results(out, "SIGTERM", ranks=2)
