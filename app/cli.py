@@ -101,6 +101,34 @@ def _check_geometry(cfgs, comm, labels=None) -> None:
             raise config.ConfigError("", f"{err} (case {labels[i]})") from None
 
 
+def _check_output(path, comm) -> None:
+    """The result directory must be creatable (or exist) and be writable: checked on rank 0 before
+    anything runs, without creating it; a ConfigError naming the path on every rank otherwise."""
+    problem = _output_problem(Path(path)) if comm.rank == 0 else None
+    problem = comm.bcast(problem, root=0)
+    if problem:
+        raise config.ConfigError("", f"result directory '{path}' (-o/--output): {problem}")
+
+
+def _output_problem(path: Path) -> str | None:
+    import tempfile
+
+    try:
+        p = path.absolute()
+        if p.exists() and not p.is_dir():
+            return "exists and is not a directory"
+        probe = p
+        while not probe.exists():  # the nearest existing ancestor: where the directory would be created
+            probe = probe.parent
+        if not probe.is_dir():
+            return f"'{probe}' is a file, not a directory"
+        tempfile.TemporaryDirectory(prefix=".hydrobuckle-probe-", dir=probe).cleanup()
+    except OSError as err:
+        where = probe if "probe" in locals() else path
+        return f"no directory can be created in '{where}' ({err.strerror})"
+    return None
+
+
 def cmd_validate(args) -> int:
     try:
         cfg = config.load(args.config, args.set)
@@ -134,10 +162,11 @@ def cmd_run(args) -> int:
     try:
         cfg = config.load(args.config, args.set)
         _check_geometry([cfg], comm)
+        outdir = Path(args.output) if args.output else Path("results") / Path(args.config).stem
+        _check_output(outdir, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
-    outdir = Path(args.output) if args.output else Path("results") / Path(args.config).stem
     from app.workflows.pipeline import run_case
 
     summary = run_case(cfg, outdir, comm)
@@ -153,10 +182,11 @@ def cmd_converge(args) -> int:
         if not cfg["stability"]["enabled"]:
             raise config.ConfigError("stability.enabled", "must be true for a convergence study of g_c")
         _check_geometry([cfg], comm)
+        outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-converge")
+        _check_output(outdir, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
-    outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-converge")
     from app.workflows.convergence import converge
 
     studies = (args.only,) if args.only else ("time", "mesh")
@@ -217,6 +247,7 @@ def cmd_study(args) -> int:
         spec, cases = studies.study_cases(args.name, outdir, values, args.set, args.error_estimate, args.isomodes)
         _check_ranks(args, comm)
         _check_geometry([c.cfg for c in cases], comm, [c.label for c in cases])
+        _check_output(outdir, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
@@ -241,6 +272,7 @@ def cmd_sweep(args) -> int:
                                     error_estimate=args.error_estimate)
         _check_ranks(args, comm)
         _check_geometry([c.cfg for c in cases], comm, [c.label for c in cases])
+        _check_output(outdir, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     except ValueError as err:
@@ -289,6 +321,7 @@ def cmd_bench(args) -> int:
                 raise config.ConfigError("--ranks", "launches mpirun itself: run `hydrobuckle bench --ranks ...` "
                                          "without mpirun")
         _check_geometry([bench.size_config(name, args.set) for name in sizes], comm)
+        _check_output(args.output, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
