@@ -56,8 +56,8 @@ class GeometrySetup:
         return [name for name, role in self.boundaries.items() if role in roles]
 
     def material_under(self, role: str, comm) -> str:
-        """The material of most cells next to the facets of ``role`` ("film" if there are none): the
-        surface chemical potential ramp starts at its mu0."""
+        """The material of most cells next to the facets of ``role``: the surface chemical potential ramp
+        starts at its mu0. Without such cells: "film", or (no layer called so) the first material by name."""
         from app import compat
 
         domain = self.tm.mesh
@@ -80,7 +80,10 @@ class GeometrySetup:
         for part in comm.allgather(counts):
             for k, v in part.items():
                 totals[k] = totals.get(k, 0) + v
-        return max(sorted(totals), key=lambda k: totals[k]) if totals else "film"
+        if not totals:  # no cell touches the role's facets: the film if there is one, else any material
+            names = sorted(set(self.layers.values()))
+            return "film" if "film" in names else names[0]
+        return max(sorted(totals), key=lambda k: totals[k])
 
 
 class GeometryKind:

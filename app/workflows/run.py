@@ -75,8 +75,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     watch.arm()  # gmsh reset SIGINT's handler
     mats = problem.materials
     log.info(f"hydrobuckle: {cfg['geometry']['kind']} mesh with {problem.cells()} cells, {problem.dofs()} dofs "
-             f"on {comm.size} rank(s); film mu0 = {mats['film'].mu0:.4f} MPa, "
-             f"substrate mu0 = {mats['substrate'].mu0:.4f} MPa")
+             f"on {comm.size} rank(s); " + ", ".join(f"{name} mu0 = {m.mu0:.4f} MPa" for name, m in mats.items()))
     writer.setup_fields(problem)
     first = stepper.initial_record()
     tracker.start(first)
