@@ -33,9 +33,11 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="override a config key, e.g. --set material.film.modulus_ratio=20")
     run.add_argument("-q", "--quiet", action="store_true", help="no per-step progress lines")
-    val = sub.add_parser("validate", help="check a config and print it fully resolved")
+    run.add_argument("--force", action="store_true", help="run a mesh above the size limit (5,000,000 cells)")
+    val = sub.add_parser("validate", help="check a config, print its mesh size estimate and the config resolved")
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    val.add_argument("--force", action="store_true", help="accept a mesh above the size limit (5,000,000 cells)")
     sub.add_parser("version", help="print hydrobuckle, dolfinx, PETSc, SLEPc and gmsh versions")
     sub.add_parser("warmup", help="compile the built-in problems' forms now, so the first run starts at once")
     msh = sub.add_parser("mesh", help="build a config's geometry and write it as a gmsh .msh file")
@@ -129,11 +131,30 @@ def _output_problem(path: Path) -> str | None:
     return None
 
 
+def _check_mesh_size(cfg, force: bool) -> dict | None:
+    """The kind's mesh size estimate (None for a user's file); above the limit a ConfigError naming
+    mesh.element_size, unless ``force`` (an absurd element size would hang inside gmsh)."""
+    from app import geometry
+    from app.geometry.base import MAX_CELLS, size_line
+
+    est = geometry.kind_of(cfg).estimate(cfg)
+    if est is not None and est["cells"] > MAX_CELLS and not force:
+        raise config.ConfigError("mesh.element_size", f"= {cfg['mesh']['element_size']:g} gives an estimated "
+                                 f"{size_line(est)}: more than the limit of {MAX_CELLS:,} cells; allowed: a "
+                                 "coarser mesh.element_size (or fewer mesh.film_layers), or --force")
+    return est
+
+
 def cmd_validate(args) -> int:
     try:
         cfg = config.load(args.config, args.set)
+        est = _check_mesh_size(cfg, args.force)
     except config.ConfigError as err:  # one line under mpirun too (the printed config: every rank)
         return _input_error(_comm(), err)
+    from app.geometry.base import size_line
+
+    if est is not None:  # a TOML comment: the printout stays a loadable config
+        print(f"# mesh estimate: {size_line(est)}")
     print(config.dumps(cfg))
     return EXIT_OK
 
@@ -161,6 +182,7 @@ def cmd_run(args) -> int:
     comm = _comm()
     try:
         cfg = config.load(args.config, args.set)
+        _check_mesh_size(cfg, args.force)
         _check_geometry([cfg], comm)
         outdir = Path(args.output) if args.output else Path("results") / Path(args.config).stem
         _check_output(outdir, comm)

@@ -26,12 +26,21 @@ def substrate_layer_heights(H: float, first: float, grading: float) -> np.ndarra
 
     Starts near ``first`` and grows by ``grading``; the count is the one whose geometric sum
     comes closest to H, then all heights are scaled to fit H exactly."""
-    if grading == 1.0:
-        n = max(1, round(H / first))
-    else:
-        n = max(1, round(math.log(1 + H * (grading - 1) / first) / math.log(grading)))
+    n = substrate_layer_count(H, first, grading)
     h = first * grading ** np.arange(n)
     return h * (H / h.sum())
+
+
+def substrate_layer_count(H: float, first: float, grading: float) -> int:
+    """The number of substrate element layers of :func:`substrate_layer_heights` (no array: any size)."""
+    if grading == 1.0:
+        return max(1, round(H / first))
+    return max(1, round(math.log(1 + H * (grading - 1) / first) / math.log(grading)))
+
+
+def film_interface_height(w: float, layers: int, grading: float) -> float:
+    """The height of the film layer at the interface: ``film_layer_heights(w, layers, grading)[0]``."""
+    return float(film_layer_heights(w, layers, grading)[0])
 
 
 def film_layer_heights(w: float, layers: int, grading: float) -> np.ndarray:

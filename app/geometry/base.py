@@ -86,6 +86,27 @@ class GeometrySetup:
         return max(sorted(totals), key=lambda k: totals[k])
 
 
+# run/validate refuse a mesh estimated above this many cells unless --force (docs/reliability.md)
+MAX_CELLS = 5_000_000
+# memory of a serial run: RSS of the bilayer benchmark (docs/performance.md), 276/507/789 MB at
+# 28836/73610/122222 dofs, fitted linearly; more ranks add about the base each
+MEMORY_BASE_MB, MEMORY_PER_DOF_KB = 120.0, 5.5
+
+
+def structured_size(along: int, layers: int, closed: bool, what: str) -> dict:
+    """Cells, Q1 x RTCF dofs and memory of a structured quad mesh: ``along`` elements along the surface
+    (``closed``: around a closed one) x ``layers`` element layers."""
+    nodes_along = along if closed else along + 1
+    dofs = 2 * nodes_along * (layers + 1) + along * (layers + 1) + nodes_along * layers  # u at nodes, flux at edges
+    return {"cells": along * layers, "dofs": dofs, "memory_mb": MEMORY_BASE_MB + MEMORY_PER_DOF_KB * dofs / 1024,
+            "detail": f"{along:,} elements {what} x {layers} layers"}
+
+
+def size_line(est: dict) -> str:
+    return (f"{est['cells']:,} cells ({est['detail']}), {est['dofs']:,} dofs, "
+            f"about {est['memory_mb'] / 1024:,.1f} GB (serial)")
+
+
 class GeometryKind:
     """One value of ``geometry.kind``. A kind declares its keys and defaults, checks a config before
     anything runs, and builds the tagged mesh with what it means for the problem. Subclass it, then
@@ -121,6 +142,11 @@ class GeometryKind:
     def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
         """The tagged mesh and what it means; with ``msh_path`` also write the mesh as .msh."""
         raise NotImplementedError
+
+    def estimate(self, cfg: dict) -> dict | None:
+        """The mesh size from the keys alone, without meshing (:func:`structured_size`); None if unknown
+        (a user's file)."""
+        return None
 
 
 KINDS: Registry[GeometryKind] = Registry("geometry kind")

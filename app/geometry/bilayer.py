@@ -30,6 +30,17 @@ class Bilayer(GeometryKind):
                               f"= {mesh['element_size']:g} is too coarse; allowed: <= geometry.length/2 "
                               f"= {geo['length'] / 2:g}")
 
+    def estimate(self, cfg: dict) -> dict:
+        from app.geometry.base import structured_size
+        from meshes.bilayer import film_interface_height, substrate_layer_count
+
+        geo, mesh = cfg["geometry"], cfg["mesh"]
+        nx = max(1, round(geo["length"] / mesh["element_size"]))
+        first = film_interface_height(geo["film_thickness"], mesh["film_layers"], mesh["film_grading"])
+        ny = mesh["film_layers"] + substrate_layer_count(geo["substrate_thickness"], first * mesh["substrate_grading"],
+                                                         mesh["substrate_grading"])
+        return structured_size(nx, ny, closed=False, what="along the film")
+
     def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
         geo, mesh = cfg["geometry"], cfg["mesh"]
         tm = tagged_mesh(comm, geo["length"], geo["substrate_thickness"], geo["film_thickness"],
