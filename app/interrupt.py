@@ -6,6 +6,7 @@ signal of the same kind while the first is handled acts as without hydrobuckle (
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 
@@ -19,6 +20,15 @@ def _handler(signum, frame) -> None:
     global _received
     _received = max(_received, signum)
     signal.signal(signum, signal.SIG_DFL)  # a second signal ends the process as usual
+    if "OMPI_COMM_WORLD_SIZE" in os.environ:
+        # Under mpirun the signal means the job is being torn down: Open MPI no longer reads the ranks'
+        # output, and a rank blocked writing a progress line (the write this signal interrupted is
+        # retried) would hold the others in the next collective until all are killed. The output goes
+        # to /dev/null from here on; summary.json says what happened.
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        os.close(null)
 
 
 class Watch:

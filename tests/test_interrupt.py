@@ -1,6 +1,8 @@
 """SIGINT / SIGTERM during a run (docs/reliability.md): the run stops between steps, keeps
 history.csv, writes summary.json with status "interrupted" and exits 130 / 143. Under mpirun the
-signal goes to mpirun, which forwards it to every rank (Open MPI 4.1 kills them 1 s later)."""
+signal goes to mpirun, which forwards it to every rank (Open MPI 4.1 kills them 1 s later). Before
+the ranks' output was sent to /dev/null on the signal, the mpirun case passed in some sessions and
+failed in 11 of 11 attempts in another (rank 0 blocked writing a progress line, no summary)."""
 
 from __future__ import annotations
 
@@ -114,5 +116,6 @@ def test_sigterm_to_mpirun_stops_both_ranks_collectively(shared_tmp):
     code, stdout, stderr = on_rank0(_interrupt, cmd, out, signal.SIGTERM)
     assert code != 0, stdout[-2000:] + stderr[-2000:]
     assert "Traceback" not in stderr
-    assert "hydrobuckle: interrupted by SIGTERM" in stdout
+    # no "interrupted" line: Open MPI stops forwarding the ranks' output, which they send to /dev/null
+    # once signalled (else rank 0 blocks writing a progress line until it is killed: no summary)
     _check_results(out, "SIGTERM", ranks=2)
