@@ -312,10 +312,12 @@ def _check_ranks(args, comm) -> None:
 
 
 def _study_exit(rows, outdir, comm) -> int:
+    from app.workflows import studies
+
     if comm.rank == 0:
-        done = sum(r["status"] in ("buckled", "stable") for r in rows)
+        done = sum(r["status"] in studies.COMPLETE for r in rows)
         print(f"hydrobuckle: study {outdir}: {done}/{len(rows)} cases complete; study.csv, study.png, modes.png")
-    return EXIT_OK if all(r["status"] in ("buckled", "stable") for r in rows) else EXIT_SOLVER
+    return EXIT_OK if all(r["status"] in studies.COMPLETE for r in rows) else EXIT_SOLVER
 
 
 def cmd_bench(args) -> int:

@@ -22,7 +22,7 @@ from pathlib import Path
 from app import config, logging_setup
 from app.workflows.variants import variant
 
-COMPLETE = ("buckled", "stable")
+COMPLETE = ("buckled", "stable", "equilibrium")  # statuses of a finished case (resume skips it)
 ISOMODE_CROSSINGS = 6  # later crossings tracked per case for isomode curves
 
 
