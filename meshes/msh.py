@@ -11,13 +11,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import gmsh
+import numpy as np
 
 QUAD = 3  # gmsh element type of 4-node quadrilaterals
 
 
 def merge(path: str | Path) -> tuple[dict[str, int], dict[str, int]] | str:
     """Merge the file into the current gmsh model: its (cell groups, facet groups), or a sentence
-    saying what is wrong (missing, unreadable, no 2D physical groups, cells other than quadrilaterals)."""
+    saying what is wrong (missing, unreadable, 3D, no 2D physical groups, cells other than quadrilaterals,
+    unusable cells or a non-conforming interface: :func:`check_cells`), naming the group or cell."""
     path = Path(path)
     if not path.is_file():
         return "does not exist"
@@ -26,13 +28,136 @@ def merge(path: str | Path) -> tuple[dict[str, int], dict[str, int]] | str:
     except Exception as err:  # gmsh reports every parse error as a bare Exception
         return "is not a readable gmsh mesh (" + " ".join(str(err).split()) + ")"
     names = physical_names()
-    types = set(gmsh.model.mesh.getElementTypes(2))
+    volume = set(gmsh.model.mesh.getElementTypes(3))
+    if volume:
+        groups = [gmsh.model.getPhysicalName(3, t) or f"group{t}" for _, t in gmsh.model.getPhysicalGroups(3)]
+        return (f"is a 3D mesh (volume elements, gmsh element types {sorted(volume)}"
+                + (", physical group(s) " + ", ".join(map(repr, groups)) if groups else "")
+                + "); hydrobuckle needs a 2D mesh of quadrilaterals in the x-y plane")
     if not names[0]:
         return "has no 2D physical groups (cell groups name the layers)"
-    if types - {QUAD}:
+    for name, tag in names[0].items():
+        types = set()
+        for ent in gmsh.model.getEntitiesForPhysicalGroup(2, tag):
+            types |= set(gmsh.model.mesh.getElementTypes(2, ent))
+        if types - {QUAD}:
+            return (f"contains non-quadrilateral cells in cell group {name!r} (gmsh element types "
+                    f"{sorted(types)}); hydrobuckle's RTCF flux needs quadrilaterals (recombine the mesh)")
+    types = set(gmsh.model.mesh.getElementTypes(2))
+    if types - {QUAD}:  # outside the cell groups
         return (f"contains non-quadrilateral cells (gmsh element types {sorted(types)}); "
                 "hydrobuckle's RTCF flux needs quadrilaterals (recombine the mesh)")
-    return names
+    return check_cells(names[0]) or names
+
+
+def _cells(cell_groups: dict[str, int]):
+    """(element tags, their 4 node tags, their group names, node tag -> xyz lookup) of the quads in the
+    cell groups of the current model."""
+    tags, nodes, groups = [], [], []
+    for name, tag in cell_groups.items():
+        for ent in gmsh.model.getEntitiesForPhysicalGroup(2, tag):
+            etypes, etags, enodes = gmsh.model.mesh.getElements(2, ent)
+            for et, t, n in zip(etypes, etags, enodes):
+                if et == QUAD:
+                    tags.append(np.asarray(t, dtype=np.int64))
+                    nodes.append(np.asarray(n, dtype=np.int64).reshape(-1, 4))
+                    groups += [name] * len(t)
+    ntags, coords, _ = gmsh.model.mesh.getNodes()
+    xyz = np.zeros((int(ntags.max()) + 1 if len(ntags) else 1, 3))
+    xyz[np.asarray(ntags, dtype=np.int64)] = np.asarray(coords).reshape(-1, 3)
+    if not tags:
+        return np.empty(0, np.int64), np.empty((0, 4), np.int64), [], xyz
+    return np.concatenate(tags), np.concatenate(nodes), groups, xyz
+
+
+def _at(p) -> str:
+    return f"({p[0]:.6g}, {p[1]:.6g})"
+
+
+def check_cells(cell_groups: dict[str, int]) -> str | None:
+    """A sentence naming the first cell that is unusable, or None: nodes off the plane z = 0, cells that
+    are degenerate or not convex (a negative Jacobian at a corner), cells oriented against the rest of
+    the mesh (inverted: clockwise among counter-clockwise ones, or the reverse; a mesh consistently
+    clockwise is fine), and non-conforming interfaces (a node inside another cell's edge, or two
+    distinct nodes at one point: cell groups meshed separately and not joined)."""
+    etags, enodes, groups, xyz = _cells(cell_groups)
+    if len(etags) == 0:
+        return "has no quadrilateral cells in its cell groups " + ", ".join(map(repr, cell_groups))
+    pts = xyz[enodes]  # (n, 4, 3)
+    size = float(np.ptp(pts[..., :2].reshape(-1, 2), axis=0).max()) or 1.0
+    tol = 1e-9 * size
+    off = np.abs(pts[..., 2]) > tol
+    if off.any():
+        i, k = np.argwhere(off)[0]
+        return (f"has a node off the plane z = 0 (node {enodes[i, k]} at z = {pts[i, k, 2]:.6g}, cell "
+                f"{etags[i]} of group {groups[i]!r}); hydrobuckle needs a 2D mesh in the x-y plane")
+    xy = pts[..., :2]
+    cross = np.empty((len(etags), 4))
+    for k in range(4):
+        e1, e2 = xy[:, (k + 1) % 4] - xy[:, k], xy[:, (k - 1) % 4] - xy[:, k]
+        cross[:, k] = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    pos, neg = (cross > tol * tol).all(axis=1), (cross < -tol * tol).all(axis=1)
+    bad = ~(pos | neg)
+    if bad.any():
+        i = int(np.argmax(bad))
+        k = int(np.argmin(cross[i] * (1 if pos.sum() >= neg.sum() else -1)))
+        return (f"has a degenerate or non-convex cell {etags[i]} in group {groups[i]!r} (negative or zero "
+                f"Jacobian at its corner {_at(xy[i, k])}); fix or remesh that cell")
+    flipped = neg if pos.sum() >= neg.sum() else pos
+    if flipped.any():
+        i = int(np.argmax(flipped))
+        return (f"has {int(flipped.sum())} inverted cell(s), e.g. cell {etags[i]} in group {groups[i]!r} "
+                f"(centre {_at(xy[i].mean(axis=0))}): its nodes run {'clockwise' if neg[i] else 'counter-clockwise'}"
+                f" unlike the other {int(len(etags) - flipped.sum())} (negative Jacobian); reorient it "
+                "(gmsh: Mesh > Reverse, or gmsh.model.mesh.reverse)")
+    return _check_conforming(etags, enodes, groups, xyz[:, :2], tol)
+
+
+def _check_conforming(etags, enodes, groups, xy, tol) -> str | None:
+    edges = np.sort(np.stack([enodes, np.roll(enodes, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    owner = np.repeat(np.arange(len(etags)), 4)
+    uniq, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    once = counts[inverse.ravel()] == 1
+    bedges, bowner = edges[once], owner[once]
+    bnodes = np.unique(bedges)
+    node_cell = {}
+    for c, row in enumerate(enodes):
+        for n in row:
+            node_cell.setdefault(int(n), c)
+    # a boundary node strictly inside a boundary edge: a hanging node
+    order = np.argsort(xy[bnodes, 0])
+    sx, sn = xy[bnodes[order], 0], bnodes[order]
+    for (a, b), c in zip(bedges, bowner):
+        pa, pb = xy[a], xy[b]
+        lo, hi = np.searchsorted(sx, min(pa[0], pb[0]) - tol), np.searchsorted(sx, max(pa[0], pb[0]) + tol, "right")
+        cand = sn[lo:hi]
+        cand = cand[(cand != a) & (cand != b)]
+        if not len(cand):
+            continue
+        d, q = pb - pa, xy[cand] - pa
+        length2 = float(d @ d)
+        t = (q @ d) / length2
+        dist = np.abs(q[:, 0] * d[1] - q[:, 1] * d[0]) / np.sqrt(length2)
+        hit = (t > 1e-9) & (t < 1 - 1e-9) & (dist < tol + 1e-9 * np.sqrt(length2))
+        if hit.any():
+            n = int(cand[np.argmax(hit)])
+            other = node_cell[n]
+            return (f"is not conforming: node {n} at {_at(xy[n])} (cell {etags[other]}, group "
+                    f"{groups[other]!r}) lies inside an edge of cell {etags[c]} (group {groups[c]!r}) without "
+                    "being one of its nodes (a hanging node: the groups were meshed separately); mesh them "
+                    "together so they share the nodes of their interface")
+    # two distinct boundary nodes at one point: groups meshed separately, not joined
+    key = np.round(xy[bnodes] / tol).astype(np.int64)
+    _, first, cnt = np.unique(key, axis=0, return_index=True, return_counts=True)
+    if (cnt > 1).any():
+        j = int(first[np.argmax(cnt > 1)])
+        same = bnodes[(key == key[j]).all(axis=1)]
+        cells = [node_cell[int(n)] for n in same[:2]]
+        return (f"is not conforming: nodes {int(same[0])} and {int(same[1])} are distinct but both at "
+                f"{_at(xy[same[0]])} (cells {etags[cells[0]]} and {etags[cells[1]]}, groups "
+                f"{groups[cells[0]]!r} and {groups[cells[1]]!r}): the cells there are not joined; mesh the "
+                "groups together (or remove duplicate nodes, gmsh: Coherence Mesh)")
+    return None
 
 
 def physical_names() -> tuple[dict[str, int], dict[str, int]]:
