@@ -30,6 +30,15 @@ def mixed_displacement_flux_space(domain):
     return fem.FunctionSpace(domain, ufl.MixedElement([u_el, h_el]))
 
 
+def mixed_displacement_content_space(domain):
+    """Vector Q1 displacement x DG0 fluid content: the unknowns of the drained stability test
+    (the fluid content per cell is what the divergence of an RTCF flux can change)."""
+    cell = domain.ufl_cell()
+    u_el = ufl.VectorElement("Lagrange", cell, 1)
+    c_el = ufl.FiniteElement("DG", cell, 0)
+    return fem.FunctionSpace(domain, ufl.MixedElement([u_el, c_el]))
+
+
 def scalar_space(domain, family: str, degree: int):
     return fem.FunctionSpace(domain, (family, degree))
 

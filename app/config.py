@@ -62,7 +62,10 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
         "stop_at_onset": _key(bool, True, None, "false: continue and record later crossings"),
         "modes": _key(int, 3, _in_closed(1, 50), "eigenpairs reported at the onset"),
         "eigen_every": _key(int, 0, _ge(0), "also compute lambda_min every n steps (0 = only at the onset)"),
-        "tau": _key(float, 1.0e-2, _gt(0), "increment of the dissipation block of K [s]"),
+        "criterion": _key(str, "drained", _one_of("drained", "undrained", "rate"),
+                          "which perturbations count: drained (fluid may redistribute; any growing mode), "
+                          "undrained (fluid frozen) or rate (K with stability.tau)"),
+        "tau": _key(float, 1.0e-2, _gt(0), "criterion = rate only: step of the dissipation block of K [s]"),
         "screening": _key(str, "newton", _one_of("newton", "exact"),
                           "per-step test: inertia of the Newton factor (confirmed exactly) or exact K"),
         "max_crossings": _key(int, 20, _ge(1), "with stop_at_onset = false: stop after this many"),

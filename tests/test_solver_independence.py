@@ -15,7 +15,7 @@ def test_analyzer_k_is_the_problems_k_and_leaves_the_problem_alone(comm):
     tau = 0.01
     analyzer = StabilityAnalyzer.for_problem(p, tau)
     # the coefficients are the analyzer's own, the compiled kernel the problem's (no second JIT compile)
-    assert compat.form_signature(analyzer.k.form) == compat.form_signature(p.forms.hessian)
+    assert compat.form_signature(analyzer.op.k.form) == compat.form_signature(p.forms.hessian)
     w, step_tau = p.w.x.array.copy(), float(p.tau.value)
     assert step_tau != tau
     nneg = analyzer.inertia()[0]
@@ -30,7 +30,7 @@ def test_analyzer_k_is_the_problems_k_and_leaves_the_problem_alone(comm):
     A = compat.create_matrix(p.forms.hessian)
     compat.assemble_matrix_into(A, p.forms.hessian, p.bcs)
     analyzer.assemble()
-    A.axpy(-1.0, analyzer.A)
+    A.axpy(-1.0, analyzer.op.A)
     assert A.norm() == 0.0
     A.destroy()
     analyzer.destroy()

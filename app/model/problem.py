@@ -116,28 +116,50 @@ class Problem:
         """dolfinx Dirichlet conditions of the loading's conditions: (bcs, the driven boundary's
         displacement function or None)."""
         fdim = self.domain.topology.dim - 1
-        tm = self.tm
-        Wu = self.W.sub(0)
-
-        def facets(groups):
-            return np.unique(np.concatenate([tm.facets(g) for g in groups])) if groups else np.empty(0, np.int32)
-
-        bcs = []
-        for comp, groups in enumerate(bc.held):
-            if groups:
-                bcs.append(compat.dirichlet_zero_on_facets(Wu.sub(comp), facets(groups), fdim)[0])
+        self._conditions = bc
+        bcs = self.fixed_displacement_conditions(self.W.sub(0), driven=False)
         driven = None
         if bc.driven is not None:
-            dbc, driven = compat.dirichlet_function_on_facets(Wu.sub(bc.driven.component), tm.facets(bc.driven.group),
-                                                              fdim)
+            dbc, driven = compat.dirichlet_function_on_facets(self.W.sub(0).sub(bc.driven.component),
+                                                              self.tm.facets(bc.driven.group), fdim)
             bcs.append(dbc)
         if bc.flux_open is not None:
-            no_flux = np.setdiff1d(compat.exterior_facets(self.domain), facets(bc.flux_open))
+            no_flux = np.setdiff1d(compat.exterior_facets(self.domain), self._facets(bc.flux_open))
         else:  # diffusion switched off: every flux dof is zero, s stays s0
             imap = self.domain.topology.index_map(fdim)
             no_flux = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
         bcs.append(compat.dirichlet_zero_on_facets(self.W.sub(1), no_flux.astype(np.int32), fdim)[0])
         return bcs, driven
+
+    @property
+    def diffusion(self) -> bool:
+        """Whether fluid can move at all (False: every flux dof fixed, s = s0, as under compression)."""
+        return self._conditions.flux_open is not None
+
+    def permeable_facets(self) -> int:
+        """Number of facets (all ranks) where fluid may enter or leave."""
+        bc = self._conditions
+        if bc.flux_open is None:
+            return 0
+        f = self._facets(bc.flux_open)
+        imap = self.domain.topology.index_map(self.domain.topology.dim - 1)
+        return self.comm.allreduce(int(np.count_nonzero(f < imap.size_local)))
+
+    def _facets(self, groups) -> np.ndarray:
+        tm = self.tm
+        return np.unique(np.concatenate([tm.facets(g) for g in groups])) if groups else np.empty(0, np.int32)
+
+    def fixed_displacement_conditions(self, Wu, driven: bool = True) -> list:
+        """Zero Dirichlet conditions on the displacement sub-space ``Wu`` (of this or another mixed space on
+        the same mesh) wherever the loading fixes a component: held, and with ``driven`` also the driven
+        boundary. The stability tests of other spaces use them: which dofs are fixed, not their values."""
+        bc, fdim = self._conditions, self.domain.topology.dim - 1
+        bcs = [compat.dirichlet_zero_on_facets(Wu.sub(comp), self._facets(groups), fdim)[0]
+               for comp, groups in enumerate(bc.held) if groups]
+        if driven and bc.driven is not None:
+            bcs.append(compat.dirichlet_zero_on_facets(Wu.sub(bc.driven.component), self.tm.facets(bc.driven.group),
+                                                       fdim)[0])
+        return bcs
 
     def _observables(self):
         u_n, Q_n = ufl.split(self.state)

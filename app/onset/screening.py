@@ -1,18 +1,24 @@
 """The per-step stability verdict, and a verified bracket when a new negative eigenvalue appears.
 
-``screening = "exact"``: the inertia of K (converged state, zero increment, ``stability.tau``)
-after every step, one LDL^T factorization each.
+``screening = "exact"``: the inertia of the criterion's matrix (converged state, zero increment;
+:mod:`app.solvers.stability`) after every step, one LDL^T factorization each.
 
-``screening = "newton"``: every step reads the inertia of the Newton solver's last LDL^T factor,
-which that step computed anyway (K one Newton update short of the converged state, with the
-step's own tau): the stability test costs no factorization. It is a screen only: an increase is
-confirmed by the exact test at that step (a false alarm is logged and the run goes on), and the
-stable end of the bracket is verified by exact tests, walking back through the last ``keep``
-accepted states and, past them, to the last state verified exactly. The bracket that the
-bisection refines is therefore the same as with exact tests on every step, up to a screen that
-reports late (then the bracket is wider, never wrong).
-Steps without a factorization of their own (zero Newton iterations, or ``solver.factorization =
-"lu"``) are tested exactly.
+``screening = "newton"``: a step may instead read the inertia of the Newton solver's last LDL^T factor,
+which that step computed anyway (K_dt: one Newton update short of the converged state, with the step's own
+dt as tau), but only where that screen cannot miss a crossing of the criterion, i.e. where K_dt has at
+least the criterion's negative eigenvalues (``newton_screen_valid``):
+
+- ``undrained``: always (K_uu is a principal block of K_dt: interlacing);
+- ``rate``: when dt >= 2 tau (K_dt = K_inf + D/dt <= K_tau; the factor 2 covers the change of the
+  dissipation metric D between the previous and the converged state, small under the step control);
+- ``drained``: never (K_dt is stiffer than the drained matrix for every dt): every step is exact.
+
+A screened increase is confirmed by the exact test at that step (a false alarm is logged and the run goes
+on), and the stable end of the bracket is verified by exact tests, walking back through the last ``keep``
+accepted states and, past them, to the last state verified exactly. The bracket that the bisection
+refines is therefore the same as with exact tests on every step, up to a screen that reports late (then
+the bracket is wider, never wrong). Steps without a factorization of their own (zero Newton iterations,
+or ``solver.factorization = "lu"``) are tested exactly.
 """
 
 from __future__ import annotations
@@ -26,8 +32,11 @@ class StabilityScreen:
     Needs from the stepper only ``snapshot``, ``restore`` and ``factor_inertia``; from the analyzer
     only ``inertia``."""
 
-    def __init__(self, stepper, analyzer, screening: str = "newton", keep: int = 4, log=None):
+    def __init__(self, stepper, analyzer, screening: str = "newton", keep: int = 4, log=None,
+                 newton_screen_valid=None):
         self.stepper, self.analyzer, self.screening = stepper, analyzer, screening
+        # whether the Newton factor of a step of size dt may stand in for the exact test (default: always)
+        self.newton_screen_valid = newton_screen_valid or (lambda dt: True)
         self.recent: deque = deque(maxlen=keep)  # accepted states before the current one
         self.verified = None  # the last state the exact test found with no new negative eigenvalue
         self.screened_steps = 0
@@ -49,7 +58,7 @@ class StabilityScreen:
 
     def screen(self) -> int:
         """Negative-eigenvalue count of the state just accepted (screened or exact)."""
-        if self.screening == "newton":
+        if self.screening == "newton" and self.newton_screen_valid(self.stepper.dt_prev):
             inertia = self.stepper.factor_inertia()
             if inertia is not None:
                 self.screened_steps += 1

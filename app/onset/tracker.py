@@ -28,15 +28,25 @@ class StabilitySettings:
     policy: CrossingPolicy = CrossingPolicy()
     modes: int = 3  # eigenpairs reported at a crossing
     eigen_every: int = 0  # lambda_min every n steps (0: only at crossings)
-    tau: float = 1e-2  # step in the dissipation block of the tested K
+    tau: float = 1e-2  # step in the dissipation block of the tested K (criterion "rate" only)
     screening: str = "newton"
     error_estimate: bool = False  # companion runs after the run (app.workflows.error_estimate)
+    criterion: str = "drained"  # which Hessian decides stability (app.solvers.stability)
 
     @classmethod
     def from_config(cls, cfg: dict) -> StabilitySettings:
         s = cfg["stability"]
         return cls(s["enabled"], s["tolerance"], CrossingPolicy.from_flags(s["stop_at_onset"], s["max_crossings"]),
-                   s["modes"], s["eigen_every"], s["tau"], s["screening"], s["error_estimate"])
+                   s["modes"], s["eigen_every"], s["tau"], s["screening"], s["error_estimate"], s["criterion"])
+
+    def newton_screen_valid(self, dt: float) -> bool:
+        """Whether the Newton factor of a step of size dt (K_dt) has at least the criterion's negative
+        eigenvalues, so that screening with it cannot miss a crossing (app.onset.screening)."""
+        if self.criterion == "undrained":
+            return True
+        if self.criterion == "rate":
+            return dt >= 2.0 * self.tau
+        return False
 
 
 def onset_tracker(problem, stepper, settings: StabilitySettings, on_first_crossing=None, log=None, detail=None):
@@ -57,14 +67,17 @@ class OnsetTracker:
         self.settings, self.stepper = settings, stepper
         self.log = log or (lambda msg: None)
         detail = detail or (lambda msg: None)
-        self.analyzer = StabilityAnalyzer.for_problem(problem, settings.tau)
-        self.screen = StabilityScreen(stepper, self.analyzer, settings.screening, log=detail)
+        self.analyzer = StabilityAnalyzer.for_problem(problem, settings.tau, settings.criterion)
+        self.screen = StabilityScreen(stepper, self.analyzer, settings.screening, log=detail,
+                                      newton_screen_valid=settings.newton_screen_valid)
         self.bisection = Bisection(problem, stepper, self.analyzer, tolerance=settings.tolerance,
                                    n_modes=settings.modes, log=detail)
         self.on_first_crossing = on_first_crossing or (lambda crossing: None)
         self.count = 0  # negative eigenvalues on the path so far
         self.crossings: list = []
         self._bracket = None
+        self.problem = problem
+        self.limits: dict = {}  # the other criteria's verdicts at the first crossing's unstable end
 
     def start(self, rec) -> None:
         """The initial state's exact count, recorded with it."""
@@ -102,6 +115,7 @@ class OnsetTracker:
             self.log(f"  crossing #{len(self.crossings)}: t = {crossing.time:.6f} s, "
                      f"growth = {1e3 * crossing.growth_mm:.4f} um, N = {crossing.wrinkle_count:g}")
             if len(self.crossings) == 1:
+                self.limits = self._other_limits()
                 self.on_first_crossing(crossing)
             self.count += 1
             lo = crossing.hi if crossing.hi_count == self.count else crossing.lo
@@ -114,6 +128,34 @@ class OnsetTracker:
             self.screen.restart(unstable)
         return stop
 
+    def _other_limits(self) -> dict:
+        """Negative-eigenvalue counts of the criteria not chosen, at the current state (the first crossing's
+        unstable end), and what they mean: whether the drained and undrained onsets differ here."""
+        p, chosen = self.problem, self.settings.criterion
+        if not p.diffusion:
+            return {}
+        counts = {}
+        for criterion in ("drained", "undrained"):
+            if criterion == chosen:
+                continue
+            try:
+                analyzer = StabilityAnalyzer.for_problem(p, self.settings.tau, criterion)
+            except ValueError:
+                continue
+            try:
+                counts[criterion] = analyzer.inertia()[0]
+            finally:
+                analyzer.destroy()
+        out = {f"{c}_negative_eigenvalues": n for c, n in counts.items()}
+        if counts.get("undrained") == 0:
+            out["note"] = ("the undrained test (fluid frozen) is still stable at this onset: the instability needs "
+                           "the fluid to redistribute, so it grows on the diffusion time scale; the undrained "
+                           "onset is later (stability.criterion = undrained gives it)")
+            self.log(f"  note: {out['note']}")
+        elif counts.get("drained", 1) == 0:
+            out["note"] = "the drained test is stable here: unexpected (drained is never more stable than undrained)"
+        return out
+
     # --- the summary's stability entries -----------------------------------------------------
 
     def status(self, status: str) -> str:
@@ -124,14 +166,20 @@ class OnsetTracker:
 
     def onset_summary(self) -> dict:
         c = self.crossings
-        out = {"critical": c[0].as_dict()} if c else {}
+        out = {"critical": {**c[0].as_dict(), "criterion": self.criterion_summary(), "other_limits": self.limits}} \
+            if c else {}
         if len(c) > 1 or (c and self.settings.policy.after is not AfterCrossing.STOP):
             out["crossings"] = [x.as_dict() for x in c]
         return out
 
+    def criterion_summary(self) -> dict:
+        s = self.settings
+        return {"name": s.criterion, **({"tau": s.tau} if s.criterion == "rate" else {})}
+
     def tests_summary(self) -> dict:
         s = self.screen
-        return {"stability_tests": {"screening": self.settings.screening, "screened_steps": s.screened_steps,
+        return {"stability_tests": {"criterion": self.criterion_summary(), "screening": self.settings.screening,
+                                    "screened_steps": s.screened_steps,
                                     "exact_tests": self.analyzer.tests, "false_alarms": s.false_alarms,
                                     "late_screens": s.late_screens}}
 

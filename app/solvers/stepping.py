@@ -228,26 +228,35 @@ class TimeStepper:
         return self._accept(dt, res.iterations, err)
 
     def _diagnose(self, dt: float, reason: int, failures: int) -> None:
-        """After a step failed at 4 dt and again at dt for the same reason: the inertia of K at the
-        last converged state with the failing step's tau = dt (dissipation block included, Dirichlet
-        dofs removed). Negative eigenvalues mean the state has lost stability and no smaller step
-        can follow the fundamental path: raise :class:`LostStability` instead of cutting back to
-        dt_min. A positive definite K lets the cut-back go on."""
+        """After a step failed at 4 dt and again at dt for the same reason: is the last converged state
+        still stable? Two tests (app.solvers.stability): K with the failing step's tau = dt (what Newton
+        sees), and the drained test (any growing perturbation, the fluid free to redistribute; the same
+        as the first when diffusion is off). Negative eigenvalues in either mean the state has lost
+        stability and no smaller step can follow the fundamental path: raise :class:`LostStability`
+        instead of cutting back to dt_min. Both positive definite let the cut-back go on."""
         from app.solvers.stability import StabilityAnalyzer
 
-        analyzer = StabilityAnalyzer.for_problem(self.p, dt)
-        try:
-            nneg = analyzer.inertia()[0]
-        finally:
-            analyzer.destroy()
-        self.log(f"  two failures in a row (SNES reason {reason}): K at t = {self.t:.6g} s with tau = {dt:.3g} s "
-                 f"has {nneg} negative eigenvalue(s)")
-        if nneg > 0:
+        found = []
+        for criterion in ("rate", "drained") if self.p.diffusion else ("rate",):
+            if criterion == "drained" and self.p.permeable_facets() == 0:
+                continue
+            analyzer = StabilityAnalyzer.for_problem(self.p, dt, criterion)
+            try:
+                nneg = analyzer.inertia()[0]
+            finally:
+                analyzer.destroy()
+            what = f"K with tau = {dt:.3g} s" if criterion == "rate" else "the drained K"
+            self.log(f"  two failures in a row (SNES reason {reason}): {what} at t = {self.t:.6g} s has {nneg} "
+                     f"negative eigenvalue(s)")
+            if nneg > 0:
+                found.append(f"{what} has {nneg} negative eigenvalue(s)")
+                break
+        if found:
             raise LostStability(
-                f"the state lost stability at t = {self.t:.6g} s (K has {nneg} negative eigenvalue(s) with tau = "
-                f"{dt:.3g} s; Newton failed {failures} times on this step, the last two with SNES reason {reason}): "
-                f"the fundamental path cannot be followed; enable the stability test (stability.enabled = true) "
-                f"to locate the onset and its mode (hydrobuckle does not follow post-buckling paths)")
+                f"the state lost stability at t = {self.t:.6g} s ({found[0]}; Newton failed {failures} times on "
+                f"this step, the last two with SNES reason {reason}): the fundamental path cannot be followed; "
+                f"enable the stability test (stability.enabled = true, stability.criterion = drained) to locate "
+                f"the onset and its mode (hydrobuckle does not follow post-buckling paths)")
 
     def at_equilibrium(self, rec: StepRecord) -> bool:
         """time.stop_at_equilibrium: whether the run has reached its equilibrium with the held loading.
