@@ -75,3 +75,53 @@ def constrained_layer_stretch(mat: Hydrogel, mu_bar: float) -> float:
         return chemical_potential(mat, ((1.0, 0.0), (0.0, lam)), constrained_layer_fluid(mat, lam)) - mu_bar
 
     return brentq(residual, 1.0 + 1e-12, 1.0e3, xtol=1e-14, rtol=1e-14)
+
+
+# --- surface instability of the swelling constrained layer (docs/theory/drained-onset.md) -------------------
+
+BIOT_CUBIC_RATIO = 1.0 / brentq(lambda x: x**3 + x**2 + 3 * x - 1, 0.1, 0.5, xtol=1e-15)  # l2/l1 = 3.38298
+
+
+def _mixing_f2(s: float, chi: float) -> float:
+    """f''(s) of the mixing function f(s) = s ln(s/(1+s)) + chi s/(1+s)."""
+    return 1 / (s * (1 + s) ** 2) - 2 * chi / (1 + s) ** 3
+
+
+def layer_volumetric_stiffness(mat: Hydrogel, stretch: float, drained: bool) -> float:
+    """G''(J) of the constrained layer's energy W = mu_n/2 F:F + G(J) at thickness stretch l (J = l):
+    fluid frozen (undrained) gamma/(J0 l^2) + J0 eps, or with s minimized at fixed chemical potential
+    (drained) gamma/(J0 l^2) + J0 alpha f'' eps/(alpha f'' + eps): the penalty in series with mixing."""
+    g, a, e, J0 = mat.shear_modulus, mat.mixing_modulus, mat.penalty, mat.preswelling
+    if not drained:
+        return g / (J0 * stretch**2) + J0 * e
+    af = a * _mixing_f2(constrained_layer_fluid(mat, stretch), mat.interaction)
+    return g / (J0 * stretch**2) + J0 * af * e / (af + e)
+
+
+def surface_stability_margin(stretch: float, kappa: float) -> float:
+    """Biot's zero-speed surface-wave function of the traction-free half-space at F = diag(1, l), reduced
+    for W = mu_n/2 F:F + G(J), kappa = G''/mu_n (positive: stable). Short waves decide a layer bonded
+    to a rigid base, so this is the layer's onset condition."""
+    l2 = stretch
+    if 1 + kappa <= 0 or 1 + kappa * l2**2 <= 0:
+        return -1.0  # strong ellipticity lost
+    return (kappa * (1 + 3 * l2**2) + 1 - l2**2) / math.sqrt(1 + kappa) - (l2**2 - 1) * math.sqrt(1 + kappa * l2**2)
+
+
+def surface_critical_stretch(mat: Hydrogel, drained: bool = True) -> float:
+    """Thickness stretch (relative to the preswollen reference; times J0^(1/3) for the dry state) at which
+    the homogeneously swollen, laterally constrained layer loses surface stability: Kang & Huang's
+    critical swelling ratio for this free energy (drained), or the fluid-frozen (undrained) one. The first
+    root of the margin below Biot's ratio 3.383, beyond which every layer is unstable."""
+    mu_n = mat.shear_modulus * mat.preswelling ** (-1 / 3)
+
+    def margin(lam):
+        return surface_stability_margin(lam, layer_volumetric_stiffness(mat, lam, drained) / mu_n)
+
+    grid = [1.0 + 1e-9 + (BIOT_CUBIC_RATIO - 1.0) * i / 4000 for i in range(4001)]
+    prev = grid[0]
+    for lam in grid[1:]:
+        if margin(prev) > 0 >= margin(lam):
+            return brentq(margin, prev, lam, xtol=1e-14, rtol=1e-14)
+        prev = lam
+    return BIOT_CUBIC_RATIO
