@@ -8,9 +8,10 @@ R = (time of the time loop) / ((Newton iterations + accepted steps) x t_factor):
 factorization per Newton iteration plus one per step for its stability test, with t_factor the mean
 time of one numeric factorization of the Newton K in the same run and the Newton iterations of every
 solve the run made (accepted, rejected and bisection steps). R = 1 means the run costs exactly that.
-With ``stability.screening = "newton"`` most steps' stability tests reuse the Newton factor and
-factorize nothing: ``R_performed`` divides by the factorizations actually made instead (larger: the
-remaining overhead per factorization). ``R_accepted_steps`` counts only the accepted steps' Newton
+``R_performed`` divides by the factorizations actually made instead: Newton's plus every exact stability
+test (larger than R where steps are screened on the Newton factor, which factorizes nothing; smaller
+with the default drained criterion, tested exactly every step and in the bisection, although its matrix
+has only the displacement dofs and factorizes faster than K). ``R_accepted_steps`` counts only the accepted steps' Newton
 iterations in the bound (history.csv), leaving rejected and bisection solves in the time only.
 """
 
