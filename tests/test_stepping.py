@@ -161,7 +161,7 @@ def test_several_crossings_in_one_step_are_each_located_in_order(shared_tmp, com
     t_lo, t_hi = float(rows[k - 1]["time"]), float(rows[k]["time"])
     crossings = s["crossings"]
     assert len(crossings) == 3  # stability.max_crossings
-    assert crossings[0] == s["critical"]
+    assert crossings[0] == {k: s["critical"][k] for k in crossings[0]}
     assert [c["negative_eigenvalues"] for c in crossings] == [1, 2, 3]
     times = [c["time"] for c in crossings]
     assert times == sorted(times) and len(set(times)) == 3
