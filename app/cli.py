@@ -1,7 +1,8 @@
 """Command line: ``hydrobuckle run|validate|version``.
 
 Exit codes: 0 success, 1 solver failure (summary.json says "failed", history kept),
-2 bad input (one line naming the key and the allowed range; no result directory is created),
+2 bad input (one line naming the key and the allowed range; no result directory is created; a checkpoint
+that ``run --resume`` cannot continue: its directory is left as it was),
 130 / 143 interrupted by SIGINT / SIGTERM (summary.json says "interrupted", history kept).
 """
 
@@ -34,6 +35,8 @@ def _parser() -> argparse.ArgumentParser:
                      help="override a config key, e.g. --set material.film.modulus_ratio=20")
     run.add_argument("-q", "--quiet", action="store_true", help="no per-step progress lines")
     run.add_argument("--force", action="store_true", help="run a mesh above the size limit (5,000,000 cells)")
+    run.add_argument("--resume", metavar="DIR", help="continue the run in result directory DIR from its last "
+                     "checkpoint (output.checkpoint_every); any number of ranks")
     val = sub.add_parser("validate", help="check a config, print its mesh size estimate and the config resolved")
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
@@ -185,13 +188,27 @@ def cmd_run(args) -> int:
         _check_mesh_size(cfg, args.force)
         _check_geometry([cfg], comm)
         outdir = Path(args.output) if args.output else Path("results") / Path(args.config).stem
+        resume = None
+        if args.resume:
+            from app.io import checkpoint
+
+            if args.output and Path(args.output).absolute() != Path(args.resume).absolute():
+                raise config.ConfigError("", f"--resume '{args.resume}' continues in that directory: leave out "
+                                         f"-o/--output '{args.output}'")
+            outdir = Path(args.resume)
+            resume = checkpoint.check(outdir, cfg, comm)
         _check_output(outdir, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
     from app.workflows.pipeline import run_case
 
-    summary = run_case(cfg, outdir, comm)
+    from app.io.checkpoint import CheckpointError
+
+    try:
+        summary = run_case(cfg, outdir, comm, resume=resume)
+    except CheckpointError as err:  # a checkpoint that does not fit the rebuilt mesh (DIR untouched)
+        return _input_error(comm, err)
     return EXIT_OK if summary["status"] != "failed" else EXIT_SOLVER
 
 
