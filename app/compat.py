@@ -185,10 +185,14 @@ def facet_dof_normals(V) -> np.ndarray:
 
 def facet_nodes(domain) -> np.ndarray:
     """The two geometry nodes (vertices) of each local facet of a 2D mesh, shape (num_facets, 2)."""
-    fdim = domain.topology.dim - 1
-    domain.topology.create_connectivity(fdim, 0)
-    f2v = np.asarray(domain.topology.connectivity(fdim, 0).array, dtype=np.int64).reshape(-1, 2)
-    return vertex_to_geometry(domain)[f2v]
+    tdim = domain.topology.dim
+    domain.topology.create_connectivity(tdim - 1, 0)
+    domain.topology.create_connectivity(tdim, 0)
+    f2v = np.asarray(domain.topology.connectivity(tdim - 1, 0).array, dtype=np.int64).reshape(-1, 2)
+    c2v = np.asarray(domain.topology.connectivity(tdim, 0).array, dtype=np.int64).reshape(num_local_cells(domain), -1)
+    v2g = np.full(domain.topology.index_map(0).size_local + domain.topology.index_map(0).num_ghosts, -1, np.int64)
+    v2g[c2v] = cell_geometry_nodes(domain)[:, : c2v.shape[1]]  # a first-order cell's nodes are its vertices
+    return v2g[f2v]
 
 
 def exterior_facets(domain) -> np.ndarray:
