@@ -242,7 +242,10 @@ def cmd_converge(args) -> int:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
     from app.workflows.convergence import converge
-    report = converge(cfg, outdir, comm, levels=args.levels, studies=studies, coarsen=args.coarsen)
+    from app import interrupt
+
+    with interrupt.Watch(comm):  # a signal between two levels is recorded too: no further level starts
+        report = converge(cfg, outdir, comm, levels=args.levels, studies=studies, coarsen=args.coarsen)
     return EXIT_OK if report["base"] else EXIT_SOLVER
 
 

@@ -547,3 +547,20 @@ def test_interrupted_sweep_stops_after_the_current_case_and_resumes_it(long_case
     _same_rows(ref_rows, _rows(out / "modulus_ratio=1" / "history.csv"), 1e-10)
     _same_summary(ref, json.loads((out / "modulus_ratio=1" / "summary.json").read_text()), 1e-10)
     assert os.path.isfile(out / "modulus_ratio=1.2" / "summary.json")
+
+
+def _interrupt_converge(toml, out):
+    proc = _start(["converge", str(toml), "-o", str(out), "-q"])
+    _wait_rows(proc, out / "base" / "history.csv", 20)
+    proc.send_signal(signal.SIGINT)
+    code, stdout, _ = _finish(proc)
+    return code, stdout, sorted(p.name for p in out.iterdir())
+
+
+def test_interrupted_converge_starts_no_further_level(long_case, shared_tmp):
+    """SIGINT during converge's base run: exit 130 and no further level is set up (before, each one built
+    its mesh and wrote an "interrupted" directory); the report of what ran is still written."""
+    toml, _, _ = long_case
+    code, stdout, listing = on_rank0(_interrupt_converge, toml, shared_tmp / "converge")
+    assert code == 130, stdout[-2000:]
+    assert listing == ["base", "convergence.csv", "convergence.json", "convergence.md", "convergence.png"], listing
