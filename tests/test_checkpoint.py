@@ -564,3 +564,58 @@ def test_interrupted_converge_starts_no_further_level(long_case, shared_tmp):
     code, stdout, listing = on_rank0(_interrupt_converge, toml, shared_tmp / "converge")
     assert code == 130, stdout[-2000:]
     assert listing == ["base", "convergence.csv", "convergence.json", "convergence.md", "convergence.png"], listing
+
+
+MSH_CASE = """
+[geometry]
+kind = "msh"
+file = "{file}"
+wrinkles = "along"
+layers = {{ film = "film", substrate = "substrate" }}
+boundaries = {{ top = "permeable", bottom = "roller_y", left = "roller_x", right = "roller_x" }}
+[time]
+end = 0.3
+dt_initial = 0.001
+dt_max = 0.05
+[stability]
+error_estimate = false
+[output]
+fields = false
+plot = false
+checkpoint_every = 2
+"""
+MSH_MESH = """
+[geometry]
+length = 0.15
+substrate_thickness = 0.15
+film_thickness = 0.01
+[mesh]
+element_size = 0.01
+film_layers = 2
+substrate_grading = 1.25
+"""
+
+
+def test_user_msh_resumes_and_an_edited_file_is_refused(shared_tmp, comm, capsys):
+    """A user .msh (input node order: the file's): stopped by time.max_steps, resumed = uninterrupted.
+    The same config over an edited file (one byte appended) is refused: the file's sha256 is stored."""
+    on_rank0((shared_tmp / "mesh.toml").write_text, MSH_MESH)
+    msh = shared_tmp / "user.msh"
+    assert main(["mesh", str(shared_tmp / "mesh.toml"), "-o", str(msh)]) == 0
+    toml = shared_tmp / "case.toml"
+    on_rank0(toml.write_text, MSH_CASE.format(file=msh))
+    cfg = config.load(toml)
+    out = shared_tmp / "out"
+    assert main(["run", str(toml), "-o", str(out), "-q", "--set", "time.max_steps=5"]) == 1
+    assert checkpoint.check(out, cfg, comm).meta["step"] == 4
+    edited = shared_tmp / "edited"
+    on_rank0(shutil.copytree, out, edited)
+    assert main(["run", str(toml), "--resume", str(out), "-q"]) == 0
+    full = simulate(cfg, shared_tmp / "full", comm, progress=False)
+    _same_rows(_rows(shared_tmp / "full" / "history.csv"), _rows(out / "history.csv"), 1e-10)
+    _same_summary(full, json.loads((out / "summary.json").read_text()), 1e-10)
+    on_rank0(lambda: msh.write_bytes(msh.read_bytes() + b"\n"))
+    listing = on_rank0(_listing, edited)
+    assert main(["run", str(toml), "--resume", str(edited), "-q"]) == 2
+    _one_error_line(capsys, comm, "geometry.file", "changed since the checkpoint")
+    assert on_rank0(_listing, edited) == listing

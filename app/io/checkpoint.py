@@ -81,6 +81,19 @@ def result_hash(cfg: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def input_files(cfg: dict) -> dict:
+    """sha256 of each input file the config names (a user mesh, ``geometry.file``): a file edited in place
+    changes the result under an unchanged config."""
+    out = {}
+    path = cfg["geometry"].get("file")
+    if path:
+        try:
+            out["geometry.file"] = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        except OSError:
+            out["geometry.file"] = None
+    return out
+
+
 def first_difference(old: dict, new: dict) -> str | None:
     """'key = old in the checkpoint, new now' for the first result-changing key (in the config's order)
     whose value differs, or None."""
@@ -100,8 +113,18 @@ class DofLayout:
     stored, key-ordered ones (gathered to rank 0, scattered back)."""
 
     def __init__(self, problem):
+        self.comm = problem.comm
+        error = None
+        try:
+            self._build(problem)
+        except RuntimeError as err:  # raised on every rank, so none waits in a collective
+            error = str(err)
+        errors = [e for e in self.comm.allgather(error) if e]
+        if errors:
+            raise RuntimeError(f"checkpoint layout: {errors[0]}")
+
+    def _build(self, problem):
         p = problem
-        self.comm = p.comm
         orig = compat.original_node_indices(p.domain)
         if orig.size and orig.max() >= KEY_BASE:
             raise RuntimeError(f"input node index {orig.max()} >= 2^31: facet keys would overflow")
@@ -156,16 +179,20 @@ class DofLayout:
 
     def _gather_keys(self):
         parts = self.comm.gather((self.u_key[: self.nu], self.u_x[: self.nu], self.q_key[: self.nq]), root=0)
-        if self.comm.rank != 0:
-            return None
-        uk = np.concatenate([p[0] for p in parts])
-        qk = np.concatenate([p[2] for p in parts])
-        ou, oq = np.argsort(uk, kind="stable"), np.argsort(qk, kind="stable")
-        for k, o, what in ((uk, ou, "node"), (qk, oq, "facet")):
-            if k.size > 1 and not (np.diff(k[o]) > 0).all():
-                raise RuntimeError(f"two owned dofs with one {what} key")
-        self._order = {"u": ou, "q": oq}
-        return uk[ou], np.concatenate([p[1] for p in parts])[ou], qk[oq]
+        keys, error = None, None
+        if self.comm.rank == 0:
+            uk = np.concatenate([p[0] for p in parts])
+            qk = np.concatenate([p[2] for p in parts])
+            ou, oq = np.argsort(uk, kind="stable"), np.argsort(qk, kind="stable")
+            for k, o, what in ((uk, ou, "node"), (qk, oq, "facet")):
+                if k.size > 1 and not (np.diff(k[o]) > 0).all():
+                    error = f"checkpoint layout: two owned dofs with one {what} key"
+            self._order = {"u": ou, "q": oq}
+            keys = uk[ou], np.concatenate([p[1] for p in parts])[ou], qk[oq]
+        error = self.comm.bcast(error, root=0)
+        if error:
+            raise RuntimeError(error)
+        return keys
 
     def gather(self, kind: str, owned: np.ndarray):
         """Collective: the owned values of every rank in key order on rank 0 (``keys()`` first), else None."""
@@ -308,7 +335,8 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list) ->
     size = 0.0
     error = None
     if rank0:
-        meta = {"format": FORMAT, "result_hash": result_hash(cfg), "config": cfg, "ranks": comm.size,
+        meta = {"format": FORMAT, "result_hash": result_hash(cfg), "inputs": input_files(cfg), "config": cfg,
+                "ranks": comm.size,
                 "t": stepper.t, "step": stepper.step, "snapshots": snap_meta, "current": current,
                 "stepper": stepper.counters(), "tracker": tracker_meta, "rows": rows}
         sink.put("meta", np.array(json.dumps(meta, default=_json_default)))
@@ -392,8 +420,9 @@ def _read(path: Path, cfg: dict) -> dict:
             for field, shape in (("state_u", (n, 2)), ("state_q", (m,)), ("rate_u", (n, 2)), ("dQ_prev", (m,))):
                 if arrays[s[field]].shape != shape:
                     raise ValueError(f"array {s[field]} has shape {arrays[s[field]].shape}, not {shape}")
-        for key in ("result_hash", "config", "t", "step", "current", "stepper", "tracker", "rows"):
+        for key in ("result_hash", "inputs", "t", "step", "current", "stepper", "tracker", "rows"):
             meta[key]  # noqa: B018 - every key must be there
+        float(meta["config"]["time"]["end"])
     except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile) as err:
         reason = f"{type(err).__name__}: {err}".replace("\n", " ")
         raise CheckpointError(f"{where}: the checkpoint {FILE} is unreadable ({reason[:200]})") from None
@@ -401,6 +430,10 @@ def _read(path: Path, cfg: dict) -> dict:
         diff = first_difference(meta["config"], cfg) or "the result-changing keys' hash"
         raise CheckpointError(f"{where}: the config differs from the checkpoint's in a key that changes the "
                               f"result: {diff}")
+    for key, digest in input_files(cfg).items():
+        if meta["inputs"].get(key) != digest:
+            raise CheckpointError(f"{where}: the file {key} = '{cfg['geometry']['file']}' changed since the "
+                                  "checkpoint (another sha256)")
     end, old_end, t = cfg["time"]["end"], meta["config"]["time"]["end"], meta["t"]
     if end != old_end:  # a step is clipped only to reach time.end: states before it do not depend on it
         if t >= old_end * (1 - 1e-12):

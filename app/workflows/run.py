@@ -139,6 +139,9 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         watch.__exit__()
     summary = summarize(status if status == "interrupted" else tracker.status(status), message, writer.rows[-1],
                         problem, stepper, tracker, settings, cfg, time.perf_counter() - wall0)
+    if resume:  # provenance: steps and counters cover the whole run, wall_time_s this part only
+        summary["resumed_from"] = {"step": resume.meta["step"], "time": resume.meta["t"],
+                                   "ranks": resume.meta["ranks"]}
     writer.close()
     stepper.destroy()
     tracker.destroy()
