@@ -79,11 +79,17 @@ def _same_summary(ref: dict, got: dict, rel: float) -> None:
         assert (a is None) == (b is None)
         if a is None:
             continue
+        # eigenvalues near zero (at the bracket ends) relative to the largest reported one, as test_pinned
+        scale = max(abs(m["eigenvalue"]) for m in a["modes"])
+
+        def close(x, y, eigenvalue=False):
+            return abs(x - y) <= rel * max(abs(x), abs(y), scale if eigenvalue else 0.0)
+
         for key in CRITICAL:
-            assert _rel(a[key], b[key]) <= rel, (key, a[key], b[key])
-        assert all(_rel(x, y) <= rel for x, y in zip(a["bracket"], b["bracket"]))
+            assert close(a[key], b[key], key.startswith("lambda")), (key, a[key], b[key])
+        assert all(close(x, y) for x, y in zip(a["bracket"], b["bracket"]))
         assert [m["wrinkle_count"] for m in a["modes"]] == [m["wrinkle_count"] for m in b["modes"]]
-        assert all(_rel(x["eigenvalue"], y["eigenvalue"]) <= rel for x, y in zip(a["modes"], b["modes"]))
+        assert all(close(x["eigenvalue"], y["eigenvalue"], True) for x, y in zip(a["modes"], b["modes"]))
 
 
 def _listing(d) -> dict:
@@ -244,10 +250,23 @@ def test_resume_continues_like_an_uninterrupted_run(extra, stop, shared_tmp, com
     resumed = simulate(cfg, part, comm, progress=False, resume=resume)
     _same_rows(_rows(shared_tmp / "full" / "history.csv"), _rows(part / "history.csv"), 1e-10)
     _same_summary(full, resumed, 1e-10)
-    if extra:
-        a, b = (np.loadtxt(d / "mode_surface.csv", delimiter=",", skiprows=1) for d in (shared_tmp / "full", part))
-        assert np.abs(a - b).max() <= 1e-10 * np.abs(a).max()
+    if extra:  # the first crossing's mode files, written before the checkpoint, are kept
+        _same_mode_surface(shared_tmp / "full" / "mode_surface.csv", part / "mode_surface.csv")
     assert not (part / checkpoint.FILE).exists()  # the run ended normally: nothing left to resume
+
+
+def _same_mode_surface(ref, got) -> None:
+    """Two mode_surface.csv files: the same surface nodes (rows in the partition's order: sorted here),
+    the same critical state, and the same mode up to its sign (an eigenvector's sign is arbitrary: it
+    flips between two uninterrupted 2-rank runs). The mode is SLEPc's eigenvector, converged to 1e-10 in
+    its residual, so 1e-8 (measured between two uninterrupted 2-rank runs: 2e-12)."""
+    a, b = (np.loadtxt(f, delimiter=",", skiprows=1) for f in (ref, got))
+    a, b = (m[np.lexsort((m[:, 1], m[:, 0]))] for m in (a, b))
+    assert a.shape == b.shape and np.abs(a[:, :2] - b[:, :2]).max() < 1e-12
+    state = np.abs(a[:, 4:] - b[:, 4:]).max() / np.abs(a[:, 4:]).max()
+    sign = np.sign(np.sum(a[:, 2:4] * b[:, 2:4]))
+    mode = np.abs(a[:, 2:4] - sign * b[:, 2:4]).max() / np.abs(a[:, 2:4]).max()
+    assert state <= 1e-10 and mode <= 1e-8, (state, mode)
 
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size != 2, reason="writes on 1 rank and resumes on 2 (and the reverse)")
