@@ -197,7 +197,7 @@ def _stored_fluxes_by_hand(path) -> None:
     from its vertex of lower input index to the higher, turned by -90 degrees (exact for linear Q with
     the midpoint value); the stored displacement is u at the stored node."""
     with np.load(path / checkpoint.FILE) as z:
-        meta = json.loads(str(z["meta"].item()))
+        meta = json.loads(z["meta"].tobytes().decode())
         s = meta["snapshots"][meta["current"]]
         uk, x, qk = z["u_key"], z["x"], z["q_key"]
         lo, hi = x[np.searchsorted(uk, qk // checkpoint.KEY_BASE)], x[np.searchsorted(uk, qk % checkpoint.KEY_BASE)]

@@ -5,7 +5,7 @@ A checkpoint is one file, ``checkpoint.npz`` in the result directory, written by
 the new checkpoint, never a torn one. It holds everything the run loop needs to go on as if never
 stopped (docs/reliability.md, "Checkpoint and restart"):
 
-- ``meta`` (JSON): the format, the resolved config and the hash of its result-changing keys, the
+- ``meta`` (JSON text as bytes): the format, the resolved config and the hash of its result-changing keys, the
   stepper's scalars (t, step, dt_next, dt_prev, history_valid, inflow, counters, the equilibrium
   test's volumes, Newton's residual scale), the onset tracker's state (negative-eigenvalue count,
   crossings so far, the screen's remembered states and counters) and the history.csv rows so far;
@@ -335,11 +335,13 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list) ->
     size = 0.0
     error = None
     if rank0:
-        meta = {"format": FORMAT, "result_hash": result_hash(cfg), "inputs": input_files(cfg), "config": cfg,
-                "ranks": comm.size,
-                "t": stepper.t, "step": stepper.step, "snapshots": snap_meta, "current": current,
-                "stepper": stepper.counters(), "tracker": tracker_meta, "rows": rows}
-        sink.put("meta", np.array(json.dumps(meta, default=_json_default)))
+        try:  # nothing rank 0 does alone may raise: the other ranks wait for its verdict below
+            meta = {"format": FORMAT, "result_hash": result_hash(cfg), "inputs": input_files(cfg), "config": cfg,
+                    "ranks": comm.size, "t": stepper.t, "step": stepper.step, "snapshots": snap_meta,
+                    "current": current, "stepper": stepper.counters(), "tracker": tracker_meta, "rows": rows}
+            sink.put("meta", np.frombuffer(json.dumps(meta, default=_json_default).encode(), dtype=np.uint8))
+        except (TypeError, ValueError) as err:
+            sink.error = sink.error or err
         sink.close()
         if sink.error is None:
             try:
@@ -409,7 +411,7 @@ def _read(path: Path, cfg: dict) -> dict:
                               "output.checkpoint_every accepted steps and when interrupted)")
     try:
         with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"].item()))
+            meta = json.loads(z["meta"].tobytes().decode())
             if not isinstance(meta, dict) or meta.get("format") != FORMAT:
                 raise ValueError(f"format {meta.get('format') if isinstance(meta, dict) else '?'}, not {FORMAT}")
             arrays = {name: z[name] for name in z.files if name != "meta"}  # reads all: CRC checked
