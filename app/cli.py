@@ -1,7 +1,8 @@
 """Command line: ``hydrobuckle run|validate|version``.
 
 Exit codes: 0 success, 1 solver failure (summary.json says "failed", history kept),
-2 bad input (one line naming the key and the allowed range; no result directory is created),
+2 bad input (one line naming the key and the allowed range; no result directory is created; a checkpoint
+that ``run --resume`` cannot continue: its directory is left as it was),
 130 / 143 interrupted by SIGINT / SIGTERM (summary.json says "interrupted", history kept).
 """
 
@@ -34,6 +35,8 @@ def _parser() -> argparse.ArgumentParser:
                      help="override a config key, e.g. --set material.film.modulus_ratio=20")
     run.add_argument("-q", "--quiet", action="store_true", help="no per-step progress lines")
     run.add_argument("--force", action="store_true", help="run a mesh above the size limit (5,000,000 cells)")
+    run.add_argument("--resume", metavar="DIR", help="continue the run in result directory DIR from its last "
+                     "checkpoint (output.checkpoint_every); any number of ranks")
     val = sub.add_parser("validate", help="check a config, print its mesh size estimate and the config resolved")
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
@@ -131,18 +134,27 @@ def _output_problem(path: Path) -> str | None:
     return None
 
 
-def _check_mesh_size(cfg, force: bool) -> dict | None:
+def _check_mesh_size(cfg, force: bool, label: str | None = None) -> dict | None:
     """The kind's mesh size estimate (None for a user's file); above the limit a ConfigError naming
-    mesh.element_size, unless ``force`` (an absurd element size would hang inside gmsh)."""
+    mesh.element_size, unless ``force`` (an absurd element size would hang inside gmsh). ``label``: the
+    case of a command that runs several (study, sweep, converge, bench), which have no --force for it."""
     from app import geometry
     from app.geometry.base import MAX_CELLS, size_line
 
     est = geometry.kind_of(cfg).estimate(cfg)
     if est is not None and est["cells"] > MAX_CELLS and not force:
-        raise config.ConfigError("mesh.element_size", f"= {cfg['mesh']['element_size']:g} gives an estimated "
+        way_out = ", or --force" if label is None else " (only 'run' accepts such a mesh, with --force)"
+        where = "" if label is None else f" ({label})"
+        raise config.ConfigError("mesh.element_size", f"= {cfg['mesh']['element_size']:g}{where} gives an estimated "
                                  f"{size_line(est)}: more than the limit of {MAX_CELLS:,} cells; allowed: a "
-                                 "coarser mesh.element_size (or fewer mesh.film_layers), or --force")
+                                 f"coarser mesh.element_size (or fewer mesh.film_layers){way_out}")
     return est
+
+
+def _check_mesh_sizes(cfgs, labels) -> None:
+    """The size limit for every case of a multi-run command, before anything runs."""
+    for cfg, label in zip(cfgs, labels):
+        _check_mesh_size(cfg, False, label)
 
 
 def cmd_validate(args) -> int:
@@ -185,13 +197,27 @@ def cmd_run(args) -> int:
         _check_mesh_size(cfg, args.force)
         _check_geometry([cfg], comm)
         outdir = Path(args.output) if args.output else Path("results") / Path(args.config).stem
+        resume = None
+        if args.resume:
+            from app.io import checkpoint
+
+            if args.output and Path(args.output).absolute() != Path(args.resume).absolute():
+                raise config.ConfigError("", f"--resume '{args.resume}' continues in that directory: leave out "
+                                         f"-o/--output '{args.output}'")
+            outdir = Path(args.resume)
+            resume = checkpoint.check(outdir, cfg, comm)
         _check_output(outdir, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
     from app.workflows.pipeline import run_case
 
-    summary = run_case(cfg, outdir, comm)
+    from app.io.checkpoint import CheckpointError
+
+    try:
+        summary = run_case(cfg, outdir, comm, resume=resume)
+    except CheckpointError as err:  # a checkpoint that does not fit the rebuilt mesh (DIR untouched)
+        return _input_error(comm, err)
     return EXIT_OK if summary["status"] != "failed" else EXIT_SOLVER
 
 
@@ -203,6 +229,12 @@ def cmd_converge(args) -> int:
             raise config.ConfigError("--levels", f"= {args.levels} is out of range; allowed: 2..6")
         if not cfg["stability"]["enabled"]:
             raise config.ConfigError("stability.enabled", "must be true for a convergence study of g_c")
+        studies = (args.only,) if args.only else ("time", "mesh")
+        from app.workflows.convergence import refined_configs
+
+        for study in studies:
+            levels = refined_configs(cfg, study, args.levels, 4.0, 2.0, args.coarsen)
+            _check_mesh_sizes([c for _, _, c in levels], [f"converge level {label}" for label, _, _ in levels])
         _check_geometry([cfg], comm)
         outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-converge")
         _check_output(outdir, comm)
@@ -210,16 +242,10 @@ def cmd_converge(args) -> int:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
     from app.workflows.convergence import converge
+    from app import interrupt
 
-    studies = (args.only,) if args.only else ("time", "mesh")
-    try:
-        from app.workflows.convergence import refined_configs
-
-        for study in studies:
-            refined_configs(cfg, study, args.levels, 4.0, 2.0, args.coarsen)
-    except config.ConfigError as err:
-        return _input_error(comm, err)
-    report = converge(cfg, outdir, comm, levels=args.levels, studies=studies, coarsen=args.coarsen)
+    with interrupt.Watch(comm):  # a signal between two levels is recorded too: no further level starts
+        report = converge(cfg, outdir, comm, levels=args.levels, studies=studies, coarsen=args.coarsen)
     return EXIT_OK if report["base"] else EXIT_SOLVER
 
 
@@ -267,6 +293,7 @@ def cmd_study(args) -> int:
     try:
         values = _parse_values(args.values) if args.values else None
         spec, cases = studies.study_cases(args.name, outdir, values, args.set, args.error_estimate, args.isomodes)
+        _check_mesh_sizes([c.cfg for c in cases], [f"case {c.label}" for c in cases])
         _check_ranks(args, comm)
         _check_geometry([c.cfg for c in cases], comm, [c.label for c in cases])
         _check_output(outdir, comm)
@@ -292,6 +319,7 @@ def cmd_sweep(args) -> int:
         config.set_dotted(config.defaults(), args.param, values[0])  # the key must exist
         cases = studies.build_cases(user, args.param, values, outdir, args.set, isomodes=bool(args.isomodes),
                                     error_estimate=args.error_estimate)
+        _check_mesh_sizes([c.cfg for c in cases], [f"case {c.label}" for c in cases])
         _check_ranks(args, comm)
         _check_geometry([c.cfg for c in cases], comm, [c.label for c in cases])
         _check_output(outdir, comm)
@@ -344,7 +372,9 @@ def cmd_bench(args) -> int:
             if comm.size > 1:
                 raise config.ConfigError("--ranks", "launches mpirun itself: run `hydrobuckle bench --ranks ...` "
                                          "without mpirun")
-        _check_geometry([bench.size_config(name, args.set) for name in sizes], comm)
+        size_cfgs = [bench.size_config(name, args.set) for name in sizes]
+        _check_mesh_sizes(size_cfgs, [f"bench size {name}" for name in sizes])
+        _check_geometry(size_cfgs, comm)
         _check_output(args.output, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)

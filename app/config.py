@@ -76,6 +76,8 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
         "fields": _key(bool, True, None, "write fields.xdmf"),
         "every": _key(int, 1, _ge(1), "write fields every n accepted steps"),
         "plot": _key(bool, True, None, "write history.png"),
+        "checkpoint_every": _key(int, 10, _ge(0), "write checkpoint.npz every n accepted steps (and when "
+                                 "interrupted), for 'run --resume'; 0 = off"),
     },
 }
 

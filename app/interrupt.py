@@ -56,11 +56,17 @@ class Watch:
 
     def requested(self) -> int:
         """Collective: the signal any rank received (SIGTERM before SIGINT), or 0."""
-        global agreed
-        sig = self.comm.allreduce(_received, op=_max())
-        if sig:
-            agreed = sig
-        return sig
+        return pending(self.comm)
+
+
+def pending(comm) -> int:
+    """Collective over ``comm``: the signal any of its ranks received (SIGTERM before SIGINT), or 0. A
+    signal stays received after the run it stopped, so ``study``/``sweep`` ask before each case."""
+    global agreed
+    sig = comm.allreduce(_received, op=_max())
+    if sig:
+        agreed = sig
+    return sig
 
 
 def _max():

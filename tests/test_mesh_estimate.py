@@ -85,3 +85,33 @@ def test_limit_is_on_the_cell_count(capsys):
     assert cli.main(["validate", BILAYER, *sets, "--set", "mesh.element_size=4e-5"]) == 0
     assert cli.main(["validate", BILAYER, *sets, "--set", "mesh.element_size=3.99e-5"]) == 2
     capsys.readouterr()
+
+
+MULTI = {  # the commands that run several meshes: each case, level or size is estimated before anything runs
+    "study": ["study", "bilayer-modulus-ratio", "--values", "8,10", *ABSURD],
+    "sweep": ["sweep", BILAYER, "--param", "material.film.modulus_ratio", "--values", "8,10", *ABSURD],
+    "converge": ["converge", BILAYER, "--set", "mesh.element_size=2e-5"],  # its base passes, level mesh1 does not
+    "bench": ["bench", "--sizes", "coarse", *ABSURD],
+}
+LABELS = {"study": "(case modulus_ratio=8)", "sweep": "(case modulus_ratio=8)", "converge": "(converge level mesh1)",
+          "bench": "(bench size coarse)"}
+
+
+@pytest.mark.parametrize("command", list(MULTI))
+def test_commands_running_several_meshes_refuse_an_absurd_one(command, shared_tmp, capsys, comm):
+    """study, sweep, converge and bench apply the limit to every mesh they would build (converge's refined
+    levels too): one line naming the key and the case, exit 2, no result directory, at once."""
+    out = shared_tmp / command
+    t0 = time.perf_counter()
+    assert cli.main(MULTI[command] + ["-o", str(out)]) == 2
+    assert time.perf_counter() - t0 < 10
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    lines = captured.err.strip().splitlines()
+    if comm.rank == 0:
+        assert len(lines) == 1, captured.err
+        assert lines[0].startswith("hydrobuckle: error: config key 'mesh.element_size': = ")
+        assert LABELS[command] in lines[0] and f"limit of {MAX_CELLS:,} cells" in lines[0], lines[0]
+    else:
+        assert lines == []
+    assert not out.exists()

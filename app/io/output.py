@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +21,8 @@ import ufl
 from app import compat, config, timing
 from app.model.material import chemical_potential
 
+MODE_FILES = ("mode.xdmf", "mode.h5", "mode.png", "mode_surface.csv")  # written at the first crossing
+CHECKPOINT_FILES = ("checkpoint.npz", "checkpoint.npz.tmp")  # app.io.checkpoint
 RESULT_FILES = ("summary.json", "history.csv", "config.toml", "fields.xdmf", "fields.h5", "history.png",
                 "mode.xdmf", "mode.h5", "mode.png", "mode_surface.csv")
 
@@ -66,18 +69,25 @@ class OutputSettings:
     fields: bool = True  # fields.xdmf
     every: int = 1  # fields every n accepted steps
     plot: bool = True  # history.png, mode.png
+    checkpoint_every: int = 10  # checkpoint.npz every n accepted steps (0: none; app.io.checkpoint)
 
     @classmethod
     def from_config(cls, cfg: dict) -> OutputSettings:
         o = cfg["output"]
-        return cls(o["fields"], o["every"], o["plot"])
+        return cls(o["fields"], o["every"], o["plot"], o["checkpoint_every"])
 
 
 class ResultWriter:
     """Writes one run's results into ``outdir``: what ``settings`` asks for, and the resolved ``cfg``
     as config.toml (the record of the run)."""
 
-    def __init__(self, outdir: str | Path, comm, cfg: dict, settings: OutputSettings, columns=None):
+    def __init__(self, outdir: str | Path, comm, cfg: dict, settings: OutputSettings, columns=None,
+                 resume_rows: list | None = None, keep_mode: bool = False):
+        """``resume_rows``: a run resumed from its checkpoint (``run --resume``): history.csv is rewritten
+        with these rows (the checkpoint's) and continued; the other result files are removed as for a new
+        run (fields.xdmf restarts at the resumed step), except the mode files with ``keep_mode`` (the
+        checkpoint is past the first crossing, whose mode they hold). A new run also removes the
+        directory's checkpoint."""
         self.outdir = Path(outdir)
         self.comm = comm
         self.cfg = cfg
@@ -88,14 +98,35 @@ class ResultWriter:
         self._writer = None
         self._xdmf = None
         self.rows: list[dict] = []
+        keep = set() if resume_rows is None else {"history.csv", *(MODE_FILES if keep_mode else ())}
         if self.rank0:
             self.outdir.mkdir(parents=True, exist_ok=True)
             for name in RESULT_FILES:
-                (self.outdir / name).unlink(missing_ok=True)
+                if name not in keep:
+                    (self.outdir / name).unlink(missing_ok=True)
             shutil.rmtree(self.outdir / "error-estimate", ignore_errors=True)
+            if resume_rows is None:
+                for name in CHECKPOINT_FILES:
+                    (self.outdir / name).unlink(missing_ok=True)
             (self.outdir / "config.toml").write_text(
                 "# hydrobuckle resolved configuration (every key, defaults filled in)\n" + config.dumps(cfg))
+            if resume_rows is not None:
+                self._rewrite_history(resume_rows)
+        if resume_rows is not None:
+            self.rows = list(resume_rows)
         comm.barrier()
+
+    def _rewrite_history(self, rows: list) -> None:
+        """Rank 0: history.csv holding exactly ``rows`` (written aside, then renamed), open for appending."""
+        path = self.outdir / "history.csv"
+        tmp = path.with_name("history.csv.tmp")
+        with open(tmp, "w", newline="") as f:
+            self._csv, self._writer = f, None
+            for row in rows:
+                self._write_row(row)
+        os.replace(tmp, path)
+        self._csv = open(path, "a", newline="")
+        self._writer = csv.DictWriter(self._csv, fieldnames=self.columns, extrasaction="ignore")
 
     # --- history ---------------------------------------------------------------------------
 
@@ -109,8 +140,13 @@ class ResultWriter:
         if not self.rank0:
             return
         if self._csv is None:
-            self.columns = self.columns or list(row)
             self._csv = open(self.outdir / "history.csv", "w", newline="")
+        self._write_row(row)
+
+    def _write_row(self, row: dict) -> None:
+        """One row, whole and flushed (the header first): a crash leaves valid CSV."""
+        if self._writer is None:
+            self.columns = self.columns or list(row)
             self._writer = csv.DictWriter(self._csv, fieldnames=self.columns, extrasaction="ignore")
             self._writer.writeheader()
         self._writer.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()})

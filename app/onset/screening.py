@@ -108,3 +108,17 @@ class StabilityScreen:
         self.recent.clear()
         self.recent.append(snap)
         self.verified = snap
+
+    # --- checkpoints (app.io.checkpoint) -----------------------------------------------------
+
+    def export_state(self) -> dict:
+        """The remembered snapshots (``verified`` may be one of ``recent``: the same object) and counters."""
+        return {"recent": list(self.recent), "verified": self.verified, "screened_steps": self.screened_steps,
+                "last_exact": self._last_exact, "false_alarms": self.false_alarms, "late_screens": self.late_screens}
+
+    def import_state(self, state: dict) -> None:
+        self.recent.clear()
+        self.recent.extend(state["recent"])
+        self.verified = state["verified"]
+        self.screened_steps, self._last_exact = state["screened_steps"], state["last_exact"]
+        self.false_alarms, self.late_screens = state["false_alarms"], state["late_screens"]

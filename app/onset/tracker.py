@@ -186,6 +186,18 @@ class OnsetTracker:
     def destroy(self) -> None:
         self.analyzer.destroy()
 
+    # --- checkpoints (app.io.checkpoint) -----------------------------------------------------
+
+    def export_state(self) -> dict:
+        """Everything a resumed run needs to continue this tracker identically (between steps)."""
+        return {"count": self.count, "crossings": list(self.crossings), "exact_tests": self.analyzer.tests,
+                "screen": self.screen.export_state()}
+
+    def import_state(self, state: dict) -> None:
+        self.count, self.crossings = state["count"], list(state["crossings"])
+        self.analyzer.tests = state["exact_tests"]
+        self.screen.import_state(state["screen"])
+
 
 class Untracked:
     """``stability.enabled = false``: no test, no history columns, nothing in the summary."""
@@ -212,4 +224,10 @@ class Untracked:
         return {}
 
     def destroy(self) -> None:
+        pass
+
+    def export_state(self) -> None:
+        return None
+
+    def import_state(self, state) -> None:
         pass

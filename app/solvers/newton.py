@@ -235,6 +235,16 @@ class NewtonSolver:
         nneg, nzero, npos = F.getInertia()
         return int(nneg), int(nzero), int(npos)
 
+    def counters(self) -> dict:
+        """The state that outlives one solve (for checkpoints): the problem's residual scale (the
+        roundoff-floor rule reads it) and the counters reported in the summary."""
+        return {"residual_scale": self.residual_scale, "floor_accepted": self.floor_accepted,
+                "linear_iterations": self.linear_iterations}
+
+    def set_counters(self, c: dict) -> None:
+        self.residual_scale, self.floor_accepted = c["residual_scale"], c["floor_accepted"]
+        self.linear_iterations = c["linear_iterations"]
+
     def destroy(self) -> None:
         self._options.clear()
         for obj in (self.snes, self.A, self.b, self.x, self._g):

@@ -157,6 +157,18 @@ class TimeStepper:
         self.dt_prev, self.history_valid = snap.dt_prev, snap.history_valid
         self.t, self.step, self.inflow, self.dt_next = snap.t, snap.step, snap.inflow, snap.dt_next
 
+    def counters(self) -> dict:
+        """What a checkpoint needs besides a :class:`Snapshot` to continue identically
+        (:mod:`app.io.checkpoint`): the summary's counters, the equilibrium test's volumes, Newton's scale."""
+        return {"rejected": self.rejected, "failed_solves": self.failed_solves, "volume": self._volume,
+                "volume0": self._volume0, "uptake_rate": self.uptake_rate, "newton": self.solver.counters()}
+
+    def set_counters(self, c: dict) -> None:
+        self.rejected, self.failed_solves = c["rejected"], c["failed_solves"]
+        self._volume = tuple(c["volume"]) if c["volume"] is not None else None
+        self._volume0, self.uptake_rate = c["volume0"], c["uptake_rate"]
+        self.solver.set_counters(c["newton"])
+
     # --- one step --------------------------------------------------------------------------
 
     def _clip(self, dt: float, until: float | None = None) -> float:

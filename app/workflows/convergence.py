@@ -19,7 +19,7 @@ import json
 import math
 from pathlib import Path
 
-from app import config, logging_setup
+from app import config, interrupt, logging_setup
 from app.workflows.run import simulate
 from app.workflows.variants import variant
 
@@ -90,12 +90,18 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
     rows = []
     report: dict = {"base": {}, "studies": {}, "direction": "coarsen" if coarsen else "refine"}
     base_summary = None
+    stopped = False
     for study in studies:
         values = []
         for label, value, c in plans[study]:
             level = int(label[len(study):])
             if level == 0 and base_summary is not None:
                 s = base_summary  # level 0 of every study is the base configuration: run it once
+            elif stopped or interrupt.pending(comm):  # SIGINT/SIGTERM: no further level is started
+                if not stopped:
+                    log.info(f"converge: interrupted: {label} and the later levels not run")
+                stopped = True
+                break
             else:
                 log.info(f"converge: {label} ({'tolerance' if study == 'time' else 'element_size'} = {value:g})")
                 s = simulate(c, outdir / ("base" if level == 0 else label), comm)

@@ -20,6 +20,7 @@ def after_run_steps(cfg: dict, outdir, comm) -> list:
     return steps
 
 
-def run_case(cfg: dict, outdir, comm, progress: bool = True) -> dict:
-    """Simulate ``cfg`` into ``outdir`` with its pipeline steps; return the summary."""
-    return simulate(cfg, outdir, comm, progress=progress, after=after_run_steps(cfg, outdir, comm))
+def run_case(cfg: dict, outdir, comm, progress: bool = True, resume=None) -> dict:
+    """Simulate ``cfg`` into ``outdir`` with its pipeline steps; return the summary (``resume``: the
+    directory's checked checkpoint to continue from, :func:`app.io.checkpoint.check`)."""
+    return simulate(cfg, outdir, comm, progress=progress, after=after_run_steps(cfg, outdir, comm), resume=resume)

@@ -11,6 +11,7 @@ import time
 from dataclasses import asdict, dataclass
 
 from app import interrupt, logging_setup, timing
+from app.io import checkpoint
 from app.io.output import OutputSettings, ResultWriter, versions
 from app.model.problem import Problem
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
@@ -54,17 +55,22 @@ def progress_line(rec: StepRecord) -> str:
             + (f"  neg.eig. {nneg}" if nneg is not None else ""))
 
 
-def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: bool = True, after=()) -> dict:
+def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: bool = True, after=(),
+             resume: checkpoint.Resume | None = None, stop_after: int | None = None) -> dict:
     """Run the transient problem of ``cfg``; write results to ``outdir``; return the summary.
 
     ``after``: callables that amend the summary once the run has ended and its solvers are freed,
-    before summary.json is written (the run pipeline's error estimate, :mod:`app.workflows.pipeline`)."""
+    before summary.json is written (the run pipeline's error estimate, :mod:`app.workflows.pipeline`).
+    ``resume``: ``outdir``'s checked checkpoint (:func:`app.io.checkpoint.check`) to continue from; the
+    directory is not touched before its state is in place (a :class:`~app.io.checkpoint.CheckpointError`
+    before that leaves it as it was). ``stop_after``: stop as an interrupt would (checkpoint, status
+    "interrupted") once this many steps are accepted (tests)."""
     log = logging_setup.get()
     detail = log.info if progress else log.debug
     wall0 = time.perf_counter()
     settings = RunSettings.from_config(cfg)
     columns = StepRecord.COLUMNS + (OnsetTracker.COLUMNS if settings.stability.enabled else ())
-    writer = ResultWriter(outdir, comm, cfg, settings.output, columns=columns)
+    writer = None if resume else ResultWriter(outdir, comm, cfg, settings.output, columns=columns)
     watch = interrupt.Watch(comm).__enter__()  # SIGINT/SIGTERM: recorded, acted on between steps
     with timing.timed("setup"):
         if problem is None:
@@ -73,23 +79,42 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         tracker = onset_tracker(problem, stepper, settings.stability, log=log.info, detail=detail,
                                 on_first_crossing=lambda crossing: writer.write_mode(problem, crossing))
     watch.arm()  # gmsh reset SIGINT's handler
+    checkpoints = checkpoint.Checkpoints(outdir, cfg, settings.output.checkpoint_every, log=log.info)
+    if resume:
+        try:
+            checkpoints.resumed(checkpoint.restore(resume, problem, stepper, tracker), stepper.step)
+        except BaseException:
+            watch.__exit__()
+            stepper.destroy()
+            tracker.destroy()
+            raise
+        writer = ResultWriter(outdir, comm, cfg, settings.output, columns=columns, resume_rows=resume.rows,
+                              keep_mode=resume.crossings > 0)
     mats = problem.materials
     log.info(f"hydrobuckle: {cfg['geometry']['kind']} mesh with {problem.cells()} cells, {problem.dofs()} dofs "
              f"on {comm.size} rank(s); " + ", ".join(f"{name} mu0 = {m.mu0:.4f} MPa" for name, m in mats.items()))
     writer.setup_fields(problem)
-    first = stepper.initial_record()
-    tracker.start(first)
-    writer.history_row(row_of(first))
-    writer.write_fields(0.0)
-    stepper.at_equilibrium(first)
+    if resume:
+        log.info(f"hydrobuckle: resumed from {resume.path} at step {stepper.step}, t = {stepper.t:.6g} s "
+                 f"(written on {resume.meta['ranks']} rank(s))")
+        writer.write_fields(stepper.t, stepper.step)
+    else:
+        first = stepper.initial_record()
+        tracker.start(first)
+        writer.history_row(row_of(first))
+        writer.write_fields(0.0)
+        stepper.at_equilibrium(first)
     status, message = "completed", ""
     try:
         while not stepper.done():
-            if sig := watch.requested():  # collective: every rank leaves after the same step
+            sig = watch.requested()  # collective: every rank leaves after the same step
+            if sig or (stop_after is not None and stepper.step >= stop_after):
                 status = "interrupted"
-                message = (f"interrupted by {interrupt.name(sig)} at t = {writer.rows[-1]['time']:.6g} s "
-                           f"after {stepper.step} steps")
+                how = interrupt.name(sig) if sig else f"stop_after = {stop_after}"
+                message = f"interrupted by {how} at t = {writer.rows[-1]['time']:.6g} s after {stepper.step} steps"
                 log.info(f"hydrobuckle: {message}")
+                with timing.timed("output"):
+                    checkpoints.write(problem, stepper, tracker, writer.rows)
                 break
             rec = stepper.advance()
             writer.write_fields(rec.time, rec.step)
@@ -104,6 +129,9 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
                            f"< time.stop_at_equilibrium = {settings.time.stop_at_equilibrium:g}")
                 log.info(f"hydrobuckle: {message}")
                 break
+            if checkpoints.due(rec.step):
+                with timing.timed("output"):
+                    checkpoints.write(problem, stepper, tracker, writer.rows)
     except StepFailure as err:
         status, message = "failed", str(err)
         log.info(f"hydrobuckle: solver failure: {message}")
@@ -111,6 +139,9 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         watch.__exit__()
     summary = summarize(status if status == "interrupted" else tracker.status(status), message, writer.rows[-1],
                         problem, stepper, tracker, settings, cfg, time.perf_counter() - wall0)
+    if resume:  # provenance: steps and counters cover the whole run, wall_time_s this part only
+        summary["resumed_from"] = {"step": resume.meta["step"], "time": resume.meta["t"],
+                                   "ranks": resume.meta["ranks"]}
     writer.close()
     stepper.destroy()
     tracker.destroy()
@@ -126,6 +157,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     for step in after:
         step(summary)
     writer.summary(summary)
+    if summary["status"] not in ("interrupted", "failed"):  # ended normally: nothing to resume
+        checkpoints.remove(comm)
     return summary
 
 

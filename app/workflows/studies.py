@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from app import config, logging_setup
+from app import config, interrupt, logging_setup
 from app.workflows.variants import variant
 
 COMPLETE = ("buckled", "stable", "equilibrium")  # statuses of a finished case (resume skips it)
@@ -149,7 +149,11 @@ def is_complete(case: Case) -> bool:
 
 
 def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = False) -> None:
-    """Run every case (skipping complete ones) on groups of ``ranks_per_case`` ranks."""
+    """Run every case (skipping complete ones) on groups of ``ranks_per_case`` ranks. A case with a
+    checkpoint of its config (an interrupted or killed case) continues from it, unless ``force`` (every
+    case anew). After SIGINT/SIGTERM each group stops once its current case has stopped: the cases
+    it has not started are left without a directory."""
+    from app.io.checkpoint import CheckpointError
     from app.workflows.pipeline import run_case
 
     log = logging_setup.get()
@@ -157,19 +161,31 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
     n_groups = comm.size // k
     color = comm.rank // k if comm.rank < n_groups * k else n_groups  # leftover ranks idle
     sub = comm.Split(color, comm.rank)
+    watch = interrupt.Watch(sub).__enter__()  # a signal between cases is recorded too
     try:
         for i, case in enumerate(cases):
             if color >= n_groups or i % n_groups != color:
                 continue
+            if interrupt.pending(sub):  # collective in the group
+                if sub.rank == 0:
+                    log.info(f"study: interrupted: {case.label} and the group's later cases not started")
+                break
             if not force and is_complete(case):
                 if sub.rank == 0:
                     log.info(f"study: {case.label}: complete, skipped")
                 continue
+            resume = None if force else _checkpoint(case, sub, log)
             if sub.rank == 0:
-                log.info(f"study: {case.label}: running on {sub.size} rank(s)")
+                how = f"resuming at step {resume.meta['step']}" if resume else "running"
+                log.info(f"study: {case.label}: {how} on {sub.size} rank(s)")
             t0 = time.perf_counter()
             try:
-                run_case(case.cfg, case.outdir, sub, progress=False)
+                try:
+                    run_case(case.cfg, case.outdir, sub, progress=False, resume=resume)
+                except CheckpointError as err:  # the checkpoint does not fit the rebuilt mesh: start anew
+                    if sub.rank == 0:
+                        log.info(f"study: {case.label}: {err}; running from the start")
+                    run_case(case.cfg, case.outdir, sub, progress=False)
             except Exception as err:  # a failed case is reported, the others go on
                 if sub.rank == 0:
                     log.info(f"study: {case.label}: failed: {err}")
@@ -178,8 +194,24 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
             if sub.rank == 0:
                 log.info(f"study: {case.label}: done in {time.perf_counter() - t0:.1f} s")
     finally:
+        watch.__exit__()
         comm.barrier()
         sub.Free()
+
+
+def _checkpoint(case: Case, comm, log):
+    """The case directory's checkpoint if its config may resume it (else None, with the reason logged)."""
+    from app.io import checkpoint
+
+    has = comm.bcast((case.outdir / checkpoint.FILE).is_file() if comm.rank == 0 else None, root=0)
+    if not has:
+        return None
+    try:
+        return checkpoint.check(case.outdir, case.cfg, comm)
+    except checkpoint.CheckpointError as err:
+        if comm.rank == 0:
+            log.info(f"study: {case.label}: {err}; running from the start")
+        return None
 
 
 COLUMNS = ("series", "parameter", "value", "status", "g_c_um", "g_c_error_um", "N_c", "t_c", "mu_c",

@@ -1,0 +1,548 @@
+"""Checkpoints of a run (``output.checkpoint_every``) and what ``hydrobuckle run --resume`` reads.
+
+A checkpoint is one file, ``checkpoint.npz`` in the result directory, written by rank 0 into
+``checkpoint.npz.tmp`` (flushed to disk) and renamed over the previous one: a crash leaves the old or
+the new checkpoint, never a torn one. It holds everything the run loop needs to go on as if never
+stopped (docs/reliability.md, "Checkpoint and restart"):
+
+- ``meta`` (JSON text as bytes): the format, the resolved config and the hash of its result-changing keys, the
+  stepper's scalars (t, step, dt_next, dt_prev, history_valid, inflow, counters, the equilibrium
+  test's volumes, Newton's residual scale), the onset tracker's state (negative-eigenvalue count,
+  crossings so far, the screen's remembered states and counters) and the history.csv rows so far;
+- ``u_key``, ``x``: each mesh node's index in the mesh's input (the gmsh model) and its coordinates;
+- ``q_key``: each facet as the pair of its vertices' input indices (lo * 2^31 + hi);
+- ``a0``, ``a1``, ...: the state arrays (u and the accumulated flux Q_n of each remembered state, the
+  predictor's rate_u and dQ_prev), in key order, each stored once.
+
+The arrays are stored independently of the mesh partition: displacement dofs keyed by the input node
+index of their vertex, the RTCF flux dofs (one per facet) by their facet's vertex pair. A flux dof's
+sign depends on the facet orientation dolfinx takes from the partition's global vertex numbering, so
+the stored value is the flux along a canonical normal: the facet's tangent from its vertex with the
+lower input index to the higher, turned by -90 degrees. A restart may therefore use any number of
+ranks; the mesh is rebuilt from the same config (gmsh on one rank: the same input nodes) and checked
+against the stored coordinates.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from app import compat, config
+
+FILE = "checkpoint.npz"
+FORMAT = 1
+KEY_BASE = 1 << 31  # a facet's key: lo * KEY_BASE + hi (input node indices < 2^31)
+
+# Keys a resumed run may change: they decide when a run ends or what it writes, never a row before the
+# checkpoint or the continuation after it (time.end: only above the checkpoint's time, see check()).
+FREE_KEYS = ("output", "time.end", "time.max_steps", "stability.error_estimate")
+
+
+class CheckpointError(config.ConfigError):
+    """A checkpoint that cannot be resumed (one line; the CLI exits 2)."""
+
+    def __init__(self, message: str):
+        super().__init__("", message)
+
+
+# --- the config's result-changing keys ----------------------------------------------------------
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict) and v:
+            out.update(_flat(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def _free(key: str) -> bool:
+    return any(key == f or key.startswith(f + ".") for f in FREE_KEYS)
+
+
+def result_keys(cfg: dict) -> dict:
+    """The flattened config without :data:`FREE_KEYS`: what must be equal for a resume."""
+    return {k: v for k, v in _flat(cfg).items() if not _free(k)}
+
+
+def result_hash(cfg: dict) -> str:
+    text = json.dumps(result_keys(cfg), sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def input_files(cfg: dict) -> dict:
+    """sha256 of each input file the config names (a user mesh, ``geometry.file``): a file edited in place
+    changes the result under an unchanged config."""
+    out = {}
+    path = cfg["geometry"].get("file")
+    if path:
+        try:
+            out["geometry.file"] = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        except OSError:
+            out["geometry.file"] = None
+    return out
+
+
+def first_difference(old: dict, new: dict) -> str | None:
+    """'key = old in the checkpoint, new now' for the first result-changing key (in the config's order)
+    whose value differs, or None."""
+    a, b = result_keys(old), result_keys(new)
+    unset = "<unset>"
+    for key in list(b) + [k for k in a if k not in b]:
+        if a.get(key, unset) != b.get(key, unset):
+            return f"{key} = {a.get(key, unset)!r} in the checkpoint, {b.get(key, unset)!r} now"
+    return None
+
+
+# --- mesh-independent dof keys ---------------------------------------------------------------------
+
+
+class DofLayout:
+    """The keys of a problem's local dofs (owned + ghost) and the moves between its local arrays and the
+    stored, key-ordered ones (gathered to rank 0, scattered back)."""
+
+    def __init__(self, problem):
+        self.comm = problem.comm
+        error = None
+        try:
+            self._build(problem)
+        except RuntimeError as err:  # raised on every rank, so none waits in a collective
+            error = str(err)
+        errors = [e for e in self.comm.allgather(error) if e]
+        if errors:
+            raise RuntimeError(f"checkpoint layout: {errors[0]}")
+
+    def _build(self, problem):
+        p = problem
+        orig = compat.original_node_indices(p.domain)
+        if orig.size and orig.max() >= KEY_BASE:
+            raise RuntimeError(f"input node index {orig.max()} >= 2^31: facet keys would overflow")
+        X = compat.node_coordinates(p.domain)
+        nodes = compat.lagrange1_dof_nodes(p.V_u)  # per local displacement block
+        self.u_key, self.u_x = orig[nodes], X[nodes]
+        ends = compat.facet_nodes(p.domain)[compat.facet_of_dofs(p.V_q)]  # (n_q, 2) geometry nodes
+        swap = orig[ends[:, 0]] > orig[ends[:, 1]]
+        lo = np.where(swap, ends[:, 1], ends[:, 0])
+        hi = np.where(swap, ends[:, 0], ends[:, 1])
+        self.q_key = orig[lo] * KEY_BASE + orig[hi]
+        t = X[hi] - X[lo]
+        canonical = np.column_stack([t[:, 1], -t[:, 0]])
+        n_dof = compat.facet_dof_normals(p.V_q)
+        dot = np.einsum("ij,ij->i", n_dof, canonical)
+        if (np.abs(dot) < 0.5 * np.linalg.norm(n_dof, axis=1) * np.linalg.norm(canonical, axis=1)).any():
+            raise RuntimeError("a flux dof's normal is not along its facet's normal")
+        self.q_sign = np.sign(dot)
+        self.nu = p.V_u.dofmap.index_map.size_local  # owned displacement blocks (the first ones)
+        self.nq = p.V_q.dofmap.index_map.size_local
+        self.u_dofs, self.q_dofs = p.u_dofs, p.q_dofs
+        self.n_w = p.state.x.array.size
+        self._order = None  # rank 0: the permutation of the gathered owned dofs into key order
+        self._keys = None  # rank 0: (u_key, x, q_key) in key order, once gathered
+        self._gathered = False
+        self._where = None  # rank 0: per rank, the stored positions of its local dofs
+
+    # local arrays -> owned canonical parts
+    def u_part(self, u_unrolled: np.ndarray) -> np.ndarray:
+        return np.asarray(u_unrolled).reshape(-1, 2)[: self.nu]
+
+    def q_part(self, q: np.ndarray) -> np.ndarray:
+        return (np.asarray(q) * self.q_sign)[: self.nq]
+
+    def mixed_parts(self, w: np.ndarray):
+        return self.u_part(w[self.u_dofs]), self.q_part(w[self.q_dofs])
+
+    def mixed(self, u: np.ndarray, q_canonical: np.ndarray) -> np.ndarray:
+        """A local mixed-space array from local (owned + ghost) displacement blocks and canonical fluxes."""
+        w = np.zeros(self.n_w)
+        w[self.u_dofs] = u.ravel()
+        w[self.q_dofs] = q_canonical * self.q_sign
+        return w
+
+    # gathering (writing)
+    def keys(self):
+        """Collective (the first time): on rank 0 (u_key, x, q_key) in key order, else None."""
+        if not self._gathered:
+            self._keys = self._gather_keys()
+            self._gathered = True
+        return self._keys
+
+    def _gather_keys(self):
+        parts = self.comm.gather((self.u_key[: self.nu], self.u_x[: self.nu], self.q_key[: self.nq]), root=0)
+        keys, error = None, None
+        if self.comm.rank == 0:
+            uk = np.concatenate([p[0] for p in parts])
+            qk = np.concatenate([p[2] for p in parts])
+            ou, oq = np.argsort(uk, kind="stable"), np.argsort(qk, kind="stable")
+            for k, o, what in ((uk, ou, "node"), (qk, oq, "facet")):
+                if k.size > 1 and not (np.diff(k[o]) > 0).all():
+                    error = f"checkpoint layout: two owned dofs with one {what} key"
+            self._order = {"u": ou, "q": oq}
+            keys = uk[ou], np.concatenate([p[1] for p in parts])[ou], qk[oq]
+        error = self.comm.bcast(error, root=0)
+        if error:
+            raise RuntimeError(error)
+        return keys
+
+    def gather(self, kind: str, owned: np.ndarray):
+        """Collective: the owned values of every rank in key order on rank 0 (``keys()`` first), else None."""
+        parts = self.comm.gather(np.ascontiguousarray(owned), root=0)
+        if self.comm.rank != 0:
+            return None
+        return np.concatenate(parts)[self._order[kind]]
+
+    # scattering (restoring)
+    def locate(self, stored) -> None:
+        """Collective: match every rank's local dofs with the stored keys ((u_key, x, q_key) on rank 0);
+        a :class:`CheckpointError` on every rank if the meshes differ."""
+        parts = self.comm.gather((self.u_key, self.u_x, self.q_key), root=0)
+        problem = None
+        if self.comm.rank == 0:
+            uk, x, qk = stored
+            scale = max(1.0, float(np.abs(x).max(initial=0.0)))
+            self._where = []
+            for r, (ku, xu, kq) in enumerate(parts):
+                pu = np.minimum(np.searchsorted(uk, ku), max(uk.size - 1, 0))
+                pq = np.minimum(np.searchsorted(qk, kq), max(qk.size - 1, 0))
+                if uk.size == 0 or (uk[pu] != ku).any() or qk.size == 0 or (qk[pq] != kq).any():
+                    problem = "its mesh has nodes or facets the rebuilt mesh lacks"
+                    break
+                dx = float(np.abs(x[pu] - xu).max(initial=0.0))
+                if dx > 1e-9 * scale:
+                    problem = f"a node of the rebuilt mesh is {dx:.3g} mm away from the checkpoint's"
+                    break
+                self._where.append({"u": pu, "q": pq})
+        problem = self.comm.bcast(problem, root=0)
+        if problem:
+            raise CheckpointError(f"the checkpoint does not fit the mesh this config builds: {problem} "
+                                  "(a changed mesh file or gmsh version?)")
+
+    def scatter(self, kind: str, stored) -> np.ndarray:
+        """Collective: this rank's local values of a stored array (given on rank 0)."""
+        chunks = [stored[w[kind]] for w in self._where] if self.comm.rank == 0 else None
+        return self.comm.scatter(chunks, root=0)
+
+
+# --- writing ---------------------------------------------------------------------------------------
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, tuple):
+        return list(o)
+    raise TypeError(f"cannot store {type(o).__name__} in a checkpoint")
+
+
+_SNAP_SCALARS = ("dt_prev", "history_valid", "t", "step", "inflow", "dt_next")
+_DROPPED = ("mode", "state", "lo", "hi")  # a crossing's arrays: only needed while it is being located
+
+
+def _crossing_dict(c) -> dict:
+    return {f.name: getattr(c, f.name) for f in dataclasses.fields(c) if f.name not in _DROPPED}
+
+
+class _Sink:
+    """Rank 0's zip file; collects the first error instead of raising (the gathers must go on)."""
+
+    def __init__(self, path: Path):
+        self.error = None
+        self.names: dict[str, str] = {}  # content digest -> member name
+        self.zf = None
+        try:
+            self.zf = zipfile.ZipFile(path, "w", zipfile.ZIP_STORED, allowZip64=True)
+        except OSError as err:
+            self.error = err
+
+    def put(self, name: str, array: np.ndarray) -> None:
+        if self.error is None:
+            try:
+                with self.zf.open(name + ".npy", "w", force_zip64=True) as f:
+                    np.lib.format.write_array(f, np.asarray(array), allow_pickle=False)
+            except OSError as err:
+                self.error = err
+
+    def array(self, array: np.ndarray) -> str:
+        """The member holding ``array`` (each content stored once)."""
+        digest = hashlib.sha1(repr((array.dtype.str, array.shape)).encode() + array.tobytes()).hexdigest()
+        if digest not in self.names:
+            self.names[digest] = f"a{len(self.names)}"
+            self.put(self.names[digest], array)
+        return self.names[digest]
+
+    def close(self) -> None:
+        if self.zf is not None:
+            try:
+                self.zf.close()
+            except OSError as err:
+                self.error = self.error or err
+
+
+def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list) -> float:
+    """Write the checkpoint of the run's current state (collective; between steps). Returns its size in
+    bytes on rank 0 (0 elsewhere); an OSError on every rank if rank 0 could not write it (the previous
+    checkpoint is then left as it was)."""
+    comm = layout.comm
+    rank0 = comm.rank == 0
+    final = Path(outdir) / FILE
+    tmp = final.with_name(FILE + ".tmp")
+    sink = _Sink(tmp) if rank0 else None
+    stored = layout.keys()
+    if rank0:
+        for name, a in zip(("u_key", "x", "q_key"), stored):
+            sink.put(name, a)
+
+    snaps: list = []  # unique Snapshot objects (by identity), in order of first reference
+
+    def ref(snap) -> int:
+        for i, s in enumerate(snaps):
+            if s is snap:
+                return i
+        snaps.append(snap)
+        return len(snaps) - 1
+
+    current = ref(stepper.snapshot())
+    tstate = tracker.export_state()
+    tracker_meta = None
+    if tstate is not None:
+        screen = tstate["screen"]
+        tracker_meta = {
+            "count": tstate["count"], "exact_tests": tstate["exact_tests"],
+            "crossings": [_crossing_dict(c) for c in tstate["crossings"]],
+            "screen": {**{k: v for k, v in screen.items() if k not in ("recent", "verified")},
+                       "recent": [ref(s) for s in screen["recent"]],
+                       "verified": ref(screen["verified"]) if screen["verified"] is not None else None},
+        }
+    snap_meta = []
+    for s in snaps:
+        u, q = layout.mixed_parts(s.state)
+        members = {}
+        for field, kind, owned in (("state_u", "u", u), ("state_q", "q", q), ("rate_u", "u", layout.u_part(s.rate_u)),
+                                   ("dQ_prev", "q", layout.q_part(s.dQ_prev))):
+            full = layout.gather(kind, owned)
+            members[field] = sink.array(full) if rank0 else None
+        snap_meta.append({**{k: getattr(s, k) for k in _SNAP_SCALARS}, **members})
+    size = 0.0
+    error = None
+    if rank0:
+        try:  # nothing rank 0 does alone may raise: the other ranks wait for its verdict below
+            meta = {"format": FORMAT, "result_hash": result_hash(cfg), "inputs": input_files(cfg), "config": cfg,
+                    "ranks": comm.size, "t": stepper.t, "step": stepper.step, "snapshots": snap_meta,
+                    "current": current, "stepper": stepper.counters(), "tracker": tracker_meta, "rows": rows}
+            sink.put("meta", np.frombuffer(json.dumps(meta, default=_json_default).encode(), dtype=np.uint8))
+        except (TypeError, ValueError) as err:
+            sink.error = sink.error or err
+        sink.close()
+        if sink.error is None:
+            try:
+                with open(tmp, "rb") as f:
+                    os.fsync(f.fileno())
+                os.replace(tmp, final)
+                _fsync_dir(final.parent)
+                size = float(final.stat().st_size)
+            except OSError as err:
+                sink.error = err
+        if sink.error is not None:
+            tmp.unlink(missing_ok=True)
+            error = f"{type(sink.error).__name__}: {sink.error}"
+    error = comm.bcast(error, root=0)
+    if error:
+        raise OSError(f"checkpoint not written: {error}")
+    return size
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def remove(outdir, comm) -> None:
+    """Delete the checkpoint (collective; after a run that ended normally)."""
+    if comm.rank == 0:
+        for name in (FILE, FILE + ".tmp"):
+            (Path(outdir) / name).unlink(missing_ok=True)
+    comm.barrier()
+
+
+# --- reading ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class Resume:
+    """A checked checkpoint: its path and its meta (on every rank)."""
+
+    path: Path
+    meta: dict
+
+    @property
+    def rows(self) -> list:
+        return self.meta["rows"]
+
+    @property
+    def crossings(self) -> int:
+        return len((self.meta["tracker"] or {}).get("crossings", ()))
+
+
+def _read(path: Path, cfg: dict) -> dict:
+    """Rank 0: the meta of a checkpoint file after reading every member (a corrupt file fails here)."""
+    where = f"--resume '{path.parent}'"
+    if not path.parent.is_dir():
+        raise CheckpointError(f"{where}: no such directory")
+    if not path.is_file():
+        raise CheckpointError(f"{where}: no checkpoint in it ({FILE}; a run writes one every "
+                              "output.checkpoint_every accepted steps and when interrupted)")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(z["meta"].tobytes().decode())
+            if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+                raise ValueError(f"format {meta.get('format') if isinstance(meta, dict) else '?'}, not {FORMAT}")
+            arrays = {name: z[name] for name in z.files if name != "meta"}  # reads all: CRC checked
+        n, m = arrays["u_key"].size, arrays["q_key"].size
+        if arrays["x"].shape != (n, 2):
+            raise ValueError("node coordinates do not match the node keys")
+        for s in meta["snapshots"]:
+            for field, shape in (("state_u", (n, 2)), ("state_q", (m,)), ("rate_u", (n, 2)), ("dQ_prev", (m,))):
+                if arrays[s[field]].shape != shape:
+                    raise ValueError(f"array {s[field]} has shape {arrays[s[field]].shape}, not {shape}")
+        for key in ("result_hash", "inputs", "t", "step", "current", "stepper", "tracker", "rows"):
+            meta[key]  # noqa: B018 - every key must be there
+        float(meta["config"]["time"]["end"])
+    except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile) as err:
+        reason = f"{type(err).__name__}: {err}".replace("\n", " ")
+        raise CheckpointError(f"{where}: the checkpoint {FILE} is unreadable ({reason[:200]})") from None
+    if meta["result_hash"] != result_hash(cfg):
+        diff = first_difference(meta["config"], cfg) or "the result-changing keys' hash"
+        raise CheckpointError(f"{where}: the config differs from the checkpoint's in a key that changes the "
+                              f"result: {diff}")
+    for key, digest in input_files(cfg).items():
+        if meta["inputs"].get(key) != digest:
+            raise CheckpointError(f"{where}: the file {key} = '{cfg['geometry']['file']}' changed since the "
+                                  "checkpoint (another sha256)")
+    end, old_end, t = cfg["time"]["end"], meta["config"]["time"]["end"], meta["t"]
+    if end != old_end:  # a step is clipped only to reach time.end: states before it do not depend on it
+        if t >= old_end * (1 - 1e-12):
+            raise CheckpointError(f"{where}: the checkpoint is at its run's end (t = time.end = {old_end:g} s): "
+                                  f"time.end = {end:g} needs a new run")
+        if end <= t * (1 + 1e-12):
+            raise CheckpointError(f"{where}: time.end = {end:g} is not after the checkpoint's time t = {t:.6g} s")
+    return meta
+
+
+def check(outdir, cfg: dict, comm) -> Resume:
+    """The checkpoint of ``outdir`` if ``cfg`` may resume it (read and checked on rank 0), or a
+    :class:`CheckpointError` on every rank: no checkpoint, a corrupt one, a result-changing key changed."""
+    path = Path(outdir) / FILE
+    result = None
+    if comm.rank == 0:
+        try:
+            result = _read(path, cfg)
+        except CheckpointError as err:
+            result = str(err)
+    result = comm.bcast(result, root=0)
+    if isinstance(result, str):
+        raise CheckpointError(result)
+    return Resume(path, result)
+
+
+def restore(resume: Resume, problem, stepper, tracker) -> DofLayout:
+    """Put the checkpoint's state into a freshly built problem, stepper and tracker (collective, on any
+    number of ranks). Returns the layout (for later checkpoints)."""
+    from app.onset.crossing import Crossing
+    from app.solvers.stepping import Snapshot
+
+    layout = DofLayout(problem)
+    comm, meta = layout.comm, resume.meta
+    z = np.load(resume.path, allow_pickle=False) if comm.rank == 0 else None
+    try:
+        layout.locate((z["u_key"], z["x"], z["q_key"]) if z is not None else None)
+        n_total = comm.allreduce(layout.nu), comm.allreduce(layout.nq)
+        if z is not None and n_total != (z["u_key"].size, z["q_key"].size):
+            problem_text = f"{n_total} (nodes, facets) now, {(z['u_key'].size, z['q_key'].size)} in the checkpoint"
+        else:
+            problem_text = None
+        problem_text = comm.bcast(problem_text, root=0)
+        if problem_text:
+            raise CheckpointError(f"the checkpoint does not fit the mesh this config builds: {problem_text}")
+        cache: dict[str, np.ndarray] = {}
+
+        def local(name: str, kind: str) -> np.ndarray:
+            if name not in cache:
+                cache[name] = layout.scatter(kind, z[name] if z is not None else None)
+            return cache[name]
+
+        snaps = []
+        for s in meta["snapshots"]:
+            state = layout.mixed(local(s["state_u"], "u"), local(s["state_q"], "q"))
+            snaps.append(Snapshot(state, local(s["rate_u"], "u").ravel().copy(),
+                                  local(s["dQ_prev"], "q") * layout.q_sign,
+                                  *(s[k] for k in _SNAP_SCALARS)))
+    finally:
+        if z is not None:
+            z.close()
+    current = snaps[meta["current"]]
+    stepper.restore(current)
+    stepper.set_counters(meta["stepper"])
+    w = problem.w.x.array  # the last step's (u, dQ): only the flux output reads it before the next step
+    w[:] = 0.0
+    w[problem.u_dofs] = current.state[problem.u_dofs]
+    w[problem.q_dofs] = current.dQ_prev
+    t = meta["tracker"]
+    if t is not None:
+        crossings = [Crossing(**{**c, "bracket": tuple(c["bracket"])}) for c in t["crossings"]]
+        screen = {**t["screen"], "recent": [snaps[i] for i in t["screen"]["recent"]],
+                  "verified": snaps[t["screen"]["verified"]] if t["screen"]["verified"] is not None else None}
+        tracker.import_state({"count": t["count"], "crossings": crossings, "exact_tests": t["exact_tests"],
+                              "screen": screen})
+    comm.barrier()
+    return layout
+
+
+class Checkpoints:
+    """The run loop's checkpoints: every ``every`` accepted steps and on request (an interrupt)."""
+
+    def __init__(self, outdir, cfg: dict, every: int, log=None):
+        self.outdir, self.cfg, self.every = Path(outdir), cfg, every
+        self.log = log or (lambda msg: None)
+        self.layout = None
+        self.last_step = None  # the step of the last checkpoint written (or resumed from)
+        self.sizes: list[float] = []
+
+    def resumed(self, layout: DofLayout, step: int) -> None:
+        self.layout, self.last_step = layout, step
+
+    def due(self, step: int) -> bool:
+        return bool(self.every) and step % self.every == 0 and step != self.last_step
+
+    def write(self, problem, stepper, tracker, rows) -> None:
+        if not self.every or stepper.step == self.last_step:
+            return
+        if self.layout is None:
+            self.layout = DofLayout(problem)
+        try:
+            size = write(self.outdir, self.cfg, self.layout, stepper, tracker, rows)
+        except OSError as err:  # the run goes on; the previous checkpoint stays
+            self.log(f"hydrobuckle: warning: {err}")
+            return
+        self.last_step = stepper.step
+        self.sizes.append(size)
+
+    def remove(self, comm) -> None:
+        remove(self.outdir, comm)
