@@ -191,12 +191,13 @@ class OnsetTracker:
     def export_state(self) -> dict:
         """Everything a resumed run needs to continue this tracker identically (between steps)."""
         return {"count": self.count, "crossings": list(self.crossings), "exact_tests": self.analyzer.tests,
-                "screen": self.screen.export_state()}
+                "screen": self.screen.export_state(), "limits": dict(self.limits)}
 
     def import_state(self, state: dict) -> None:
         self.count, self.crossings = state["count"], list(state["crossings"])
         self.analyzer.tests = state["exact_tests"]
         self.screen.import_state(state["screen"])
+        self.limits = dict(state.get("limits", {}))
 
 
 class Untracked:
