@@ -138,16 +138,7 @@ class RateOperator:
 
     def embed(self, x_free: PETSc.Vec) -> np.ndarray:
         """Free-dof vector -> local array (owned + ghost) of the full mixed space W."""
-        full = self._full
-        full.set(0.0)
-        sub = full.getSubVector(self.is_free)
-        x_free.copy(sub)
-        full.restoreSubVector(self.is_free, sub)
-        f = compat.Function(self.W)
-        n = compat.owned_size(self.W)
-        f.x.array[:n] = full.array
-        f.x.scatter_forward()
-        return f.x.array.copy()
+        return _free_to_local(x_free, self.is_free, self._full, self.W)
 
     def destroy(self) -> None:
         for obj in (self.Kf, self.A, self.is_free, self._full):
@@ -249,16 +240,8 @@ class DrainedOperator:
     def embed(self, x_free: PETSc.Vec) -> np.ndarray:
         """Free displacement vector -> local array of W (the mode's displacement; flux part zero)."""
         p = self.problem
-        full = self._full
-        full.set(0.0)
-        sub = full.getSubVector(self.is_free)
-        x_free.copy(sub)
-        full.restoreSubVector(self.is_free, sub)
-        f = compat.Function(self.Wd)
-        f.x.array[:compat.owned_size(self.Wd)] = full.array
-        f.x.scatter_forward()
         ud = compat.Function(self.Vd_u)
-        ud.x.array[:] = f.x.array[self.ud_dofs]
+        ud.x.array[:] = _free_to_local(x_free, self.is_free, self._full, self.Wd)[self.ud_dofs]
         u = compat.Function(p.V_u)
         compat.interpolate(u, ud)
         out = np.zeros_like(p.state.x.array)
@@ -269,6 +252,19 @@ class DrainedOperator:
         for obj in (self.S, *self._sub.values(), self.A, self.is_free, self.is_c, self._full):
             if obj is not None:
                 obj.destroy()
+
+
+def _free_to_local(x_free: PETSc.Vec, is_free: PETSc.IS, full: PETSc.Vec, space) -> np.ndarray:
+    """A vector on the free dofs -> local array (owned + ghost) of ``space``, zero on the fixed dofs
+    (``full``: a work vector of the space's global size)."""
+    full.set(0.0)
+    sub = full.getSubVector(is_free)
+    x_free.copy(sub)
+    full.restoreSubVector(is_free, sub)
+    f = compat.Function(space)
+    f.x.array[:compat.owned_size(space)] = full.array
+    f.x.scatter_forward()
+    return f.x.array.copy()
 
 
 def criterion_operator(problem, criterion: str, tau: float | None = None):
