@@ -59,7 +59,15 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
     "stability": {
         "enabled": _key(bool, True, None, "test K for positive definiteness after every step"),
         "tolerance": _key(float, 1.0e-3, _in_open(0.0, 0.5), "relative bracket width of the onset time"),
-        "stop_at_onset": _key(bool, True, None, "false: continue and record later crossings"),
+        "stop_at_onset": _key(bool, True, None, "false: continue on the unbuckled path and record later crossings "
+                              "(the same as after_onset = \"fundamental\")"),
+        "after_onset": _key(str, None, _one_of("stop", "fundamental", "branch"),
+                            "what follows the onset: stop; continue on the unbuckled (fundamental) path; or follow "
+                            "the buckled branch (docs/postbuckling.md). Unset: from stop_at_onset", optional=True),
+        "imperfection": _key(float, 0.01, _in_closed(-1.0, 1.0),
+                             "after_onset = branch: the mode's peak surface normal displacement added at the onset, "
+                             "as a fraction of geometry.film_thickness (or mesh.element_size); sign = direction, "
+                             "not 0"),
         "modes": _key(int, 3, _in_closed(1, 50), "eigenpairs reported at the onset"),
         "eigen_every": _key(int, 0, _ge(0), "also compute lambda_min every n steps (0 = only at the onset)"),
         "criterion": _key(str, "drained", _one_of("drained", "undrained", "rate"),
@@ -372,6 +380,12 @@ def validate(cfg: dict) -> None:
         allowed = [lo.name for lo in _loadings() if lo.needs <= kind.provides]
         raise ConfigError("loading.kind", f"{loading.name!r} needs geometry.kind = " + " or ".join(map(repr, able))
                           + f"; allowed for {kind.name!r}: " + ", ".join(map(repr, allowed)))
+    stab = cfg["stability"]
+    if stab["after_onset"] == "stop" and not stab["stop_at_onset"]:
+        raise ConfigError("stability.after_onset", "= 'stop' contradicts stability.stop_at_onset = false; set one of them")
+    if stab["imperfection"] == 0.0:
+        raise ConfigError("stability.imperfection", "= 0 is out of range; allowed: [-1, 1] except 0 (the sign picks "
+                          "the direction along the mode)")
     if time["dt_initial"] > time["dt_max"]:
         raise ConfigError("time.dt_initial", f"= {time['dt_initial']:g} must be <= time.dt_max = {time['dt_max']:g}")
     if time["dt_min"] > time["dt_initial"]:

@@ -317,7 +317,8 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list) ->
     if tstate is not None:
         screen = tstate["screen"]
         tracker_meta = {
-            "count": tstate["count"], "exact_tests": tstate["exact_tests"],
+            "count": tstate["count"], "exact_tests": tstate["exact_tests"], "limits": tstate.get("limits", {}),
+            "branch": tstate.get("branch"),
             "crossings": [_crossing_dict(c) for c in tstate["crossings"]],
             "screen": {**{k: v for k, v in screen.items() if k not in ("recent", "verified")},
                        "recent": [ref(s) for s in screen["recent"]],
@@ -510,7 +511,7 @@ def restore(resume: Resume, problem, stepper, tracker) -> DofLayout:
         screen = {**t["screen"], "recent": [snaps[i] for i in t["screen"]["recent"]],
                   "verified": snaps[t["screen"]["verified"]] if t["screen"]["verified"] is not None else None}
         tracker.import_state({"count": t["count"], "crossings": crossings, "exact_tests": t["exact_tests"],
-                              "screen": screen})
+                              "screen": screen, "limits": t.get("limits", {}), "branch": t.get("branch")})
     comm.barrier()
     return layout
 

@@ -170,6 +170,10 @@ class Problem:
         self._growth_form = compat.form(ufl.dot(u_n, n) * self.ds_permeable)
         self._fluid_form = compat.form((self.mat.s0 - ufl.div(Q_n)) * self.dx)
         self._influx_form = compat.form(-ufl.dot(dQ, n) * self.ds_permeable)
+        # the stored energy of the converged state (the incremental potential without dissipation and load)
+        F_n = ufl.Identity(2) + ufl.grad(u_n)
+        bulk, constraint = self.mat.law.free_energy(F_n, self.mat.s0 - ufl.div(Q_n), self.mat)
+        self._stored_form = compat.form(bulk * self.dx + constraint * self.dx_coupling)
         self._growth_dof = None
         if self.geo.growth == "vertex":
             self._growth_dof = self._locate_point_dofs(self.geo.growth_point)
@@ -215,6 +219,17 @@ class Problem:
                 local = float(np.dot(u, self.geo.growth_direction))
             return self.comm.allreduce(local)
         return compat.assemble_scalar(self._growth_form, self.comm) / self.surface_length
+
+    def stored_energy(self) -> float:
+        """Stored (free) energy of the converged state [N mm / mm depth]: psi integrated over the reference."""
+        return compat.assemble_scalar(self._stored_form, self.comm)
+
+    def surface_shape(self, array=None) -> tuple[float, float]:
+        """(amplitude [mm], wrinkle count) of the permeable surface's shape in ``array`` (default: the converged
+        state); :func:`app.onset.wrinkles.surface_shape`."""
+        from app.onset.wrinkles import surface_shape
+
+        return surface_shape(self, self.state.x.array if array is None else array)
 
     def fluid_volume(self) -> float:
         """Integral of the fluid content s over the reference domain [mm^2 per unit depth]."""

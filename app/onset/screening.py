@@ -50,9 +50,11 @@ class StabilityScreen:
         return self.analyzer.inertia()[0]
 
     def start(self) -> int:
-        """Exact negative-eigenvalue count of the initial state."""
+        """Exact negative-eigenvalue count of the current state, which becomes the only remembered one (the
+        initial state; a state just perturbed onto a branch)."""
         count = self._exact()
         self.verified = self.stepper.snapshot()
+        self.recent.clear()
         self.recent.append(self.verified)
         return count
 

@@ -32,12 +32,15 @@ class StabilitySettings:
     screening: str = "newton"
     error_estimate: bool = False  # companion runs after the run (app.workflows.error_estimate)
     criterion: str = "drained"  # which Hessian decides stability (app.solvers.stability)
+    imperfection: float = 0.01  # after_onset = branch: the mode's surface amplitude / film thickness
 
     @classmethod
     def from_config(cls, cfg: dict) -> StabilitySettings:
         s = cfg["stability"]
-        return cls(s["enabled"], s["tolerance"], CrossingPolicy.from_flags(s["stop_at_onset"], s["max_crossings"]),
-                   s["modes"], s["eigen_every"], s["tau"], s["screening"], s["error_estimate"], s["criterion"])
+        return cls(s["enabled"], s["tolerance"],
+                   CrossingPolicy.from_flags(s["stop_at_onset"], s["max_crossings"], s.get("after_onset")),
+                   s["modes"], s["eigen_every"], s["tau"], s["screening"], s["error_estimate"], s["criterion"],
+                   s.get("imperfection", 0.01))
 
     def newton_screen_valid(self, dt: float) -> bool:
         """Whether the Newton factor of a step of size dt (K_dt) has at least the criterion's negative
@@ -49,11 +52,13 @@ class StabilitySettings:
         return False
 
 
-def onset_tracker(problem, stepper, settings: StabilitySettings, on_first_crossing=None, log=None, detail=None):
-    """The tracker a run with these settings needs (:class:`Untracked` when the test is off)."""
+def onset_tracker(problem, stepper, settings: StabilitySettings, on_first_crossing=None, log=None, detail=None,
+                  reference_length: float | None = None):
+    """The tracker a run with these settings needs (:class:`Untracked` when the test is off).
+    ``reference_length``: what stability.imperfection is a fraction of (app.onset.branching.reference_length)."""
     if not settings.enabled:
         return Untracked()
-    return OnsetTracker(problem, stepper, settings, on_first_crossing, log, detail)
+    return OnsetTracker(problem, stepper, settings, on_first_crossing, log, detail, reference_length)
 
 
 class OnsetTracker:
@@ -63,7 +68,7 @@ class OnsetTracker:
     COLUMNS = ("negative_eigenvalues", "lambda_min")  # added to history.csv
 
     def __init__(self, problem, stepper, settings: StabilitySettings, on_first_crossing=None, log=None,
-                 detail=None):
+                 detail=None, reference_length: float | None = None):
         self.settings, self.stepper = settings, stepper
         self.log = log or (lambda msg: None)
         detail = detail or (lambda msg: None)
@@ -78,6 +83,13 @@ class OnsetTracker:
         self._bracket = None
         self.problem = problem
         self.limits: dict = {}  # the other criteria's verdicts at the first crossing's unstable end
+        self.branch = None  # app.onset.branching.BranchSwitcher with after_onset = "branch"
+        self.restabilized: list[dict] = []  # on a branch: where the negative count fell
+        if settings.policy.branches:
+            from app.onset.branching import BranchSwitcher
+
+            self.branch = BranchSwitcher(problem, stepper, settings.criterion, settings.imperfection,
+                                         reference_length or 1.0, log=self.log)
 
     def start(self, rec) -> None:
         """The initial state's exact count, recorded with it."""
@@ -89,6 +101,11 @@ class OnsetTracker:
         for :meth:`resolve`."""
         nneg = self.screen.screen()
         self._bracket = None
+        if nneg < self.count and self.stepper.minimizing:  # on a branch the state can become stable again
+            self.log(f"  t = {rec.time:.6f} s: the branch has {nneg} negative eigenvalue(s), {self.count - nneg} "
+                     f"fewer than before (the buckled state settles)")
+            self.restabilized.append({"time": rec.time, "growth_mm": rec.growth_mm, "negative_eigenvalues": nneg})
+            self.count = nneg
         if nneg > self.count:
             self._bracket = self.screen.confirm(self.count, nneg)
             nneg = self._bracket[0] if self._bracket is not None else self.count
@@ -124,6 +141,11 @@ class OnsetTracker:
                 break
         self.count = max(self.count, nneg)
         self.stepper.restore(unstable)
+        if not stop and self.branch is not None:
+            self.branch.switch(self.crossings[-1])
+            self.screen.screening = "exact"  # the minimizer's factors are shifted: no screening with them
+            self.count = self.screen.start()  # the perturbed state's count is the branch's reference
+            return False
         if not stop:
             self.screen.restart(unstable)
         return stop
@@ -159,8 +181,9 @@ class OnsetTracker:
     # --- the summary's stability entries -----------------------------------------------------
 
     def status(self, status: str) -> str:
-        """A run that did not fail is "buckled", else "equilibrium" (time.stop_at_equilibrium) or "stable"."""
-        if status == "failed":
+        """A run that did not fail or end at a model limit ("contact", "inverted": a followed branch) is
+        "buckled", else "equilibrium" (time.stop_at_equilibrium) or "stable"."""
+        if status in ("failed", "contact", "inverted"):
             return status
         return "buckled" if self.crossings else ("equilibrium" if status == "equilibrium" else "stable")
 
@@ -171,6 +194,21 @@ class OnsetTracker:
         if len(c) > 1 or (c and self.settings.policy.after is not AfterCrossing.STOP):
             out["crossings"] = [x.as_dict() for x in c]
         return out
+
+    def branch_summary(self) -> dict:
+        """The summary's ``postbuckling`` block (after_onset = "branch"; empty otherwise)."""
+        if self.branch is None:
+            return {}
+        st, s = self.stepper, self.settings
+        solver = st.solver.counters()
+        return {"postbuckling": {
+            "after_onset": s.policy.after.value, "imperfection": s.imperfection,
+            "imperfection_mm": abs(s.imperfection) * self.branch.length,
+            "switches": [w.as_dict() for w in self.branch.switches],
+            "branch_crossings": [x.as_dict() for x in self.crossings[1:]],
+            "restabilized": list(self.restabilized),
+            "minimizer": {k: solver.get(k, 0) for k in ("shifted_factorizations", "saddles", "polishes")}
+            | {"energy_rejections": st.energy_rejections}}}
 
     def criterion_summary(self) -> dict:
         s = self.settings
@@ -191,13 +229,20 @@ class OnsetTracker:
     def export_state(self) -> dict:
         """Everything a resumed run needs to continue this tracker identically (between steps)."""
         return {"count": self.count, "crossings": list(self.crossings), "exact_tests": self.analyzer.tests,
-                "screen": self.screen.export_state(), "limits": dict(self.limits)}
+                "screen": self.screen.export_state(), "limits": dict(self.limits),
+                "branch": {**self.branch.export_state(), "restabilized": list(self.restabilized)}
+                if self.branch is not None else None}
 
     def import_state(self, state: dict) -> None:
         self.count, self.crossings = state["count"], list(state["crossings"])
         self.analyzer.tests = state["exact_tests"]
         self.screen.import_state(state["screen"])
         self.limits = dict(state.get("limits", {}))
+        branch = state.get("branch")
+        if branch and self.branch is not None:
+            self.branch.import_state(branch)
+            self.restabilized = list(branch.get("restabilized", ()))
+            self.screen.screening = "exact" if self.stepper.minimizing else self.screen.screening
 
 
 class Untracked:
@@ -222,6 +267,9 @@ class Untracked:
         return {}
 
     def tests_summary(self) -> dict:
+        return {}
+
+    def branch_summary(self) -> dict:
         return {}
 
     def destroy(self) -> None:

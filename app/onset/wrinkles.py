@@ -152,3 +152,48 @@ def mode_wrinkle_count(problem, mode: np.ndarray) -> float:
         return float(circumferential_wavenumber(phase, radial, weights))
     t, un, length = along_profile(coords, disp)
     return wrinkle_count(t, un, length)
+
+
+# --- the shape of a state's surface (history columns amplitude_mm and wrinkle_count) ------------------
+
+SHAPE_FLOOR = 1e-9  # amplitudes below this fraction of the surface's length are roundoff: count 0
+
+
+def surface_profile(problem, array: np.ndarray):
+    """The permeable surface's normal displacement in ``array`` with its rigid and uniform parts removed:
+    (position, profile, weights, closed). Open surfaces (bilayer): position along the surface [mm], the
+    normal displacement minus its least-squares mean and linear trend (a uniform swelling and a tilt),
+    signed so that the mean displacement is >= 0 (outwards for a swelling body). Closed surfaces (tubes):
+    phase 0..2 pi, the radial displacement minus its weighted mean and its n = 1 Fourier part (a uniform
+    swelling and a rigid translation), with the arc-length quadrature weights."""
+    coords, disp = boundary_displacement(problem, array, problem.geo.facets_with_role("permeable"))
+    if problem.geo.wrinkles == "around":
+        phase, radial, weights, _ = around_profile(coords, disp)
+        basis = np.stack([np.ones_like(phase), np.cos(phase), np.sin(phase)], axis=1)
+        closed = True
+    else:
+        phase, radial, _ = along_profile(coords, disp)
+        if radial.mean() < 0:
+            radial = -radial
+        weights = np.ones_like(phase)
+        basis = np.stack([np.ones_like(phase), phase], axis=1)
+        closed = False
+    sw = np.sqrt(weights)[:, None]
+    coef = np.linalg.lstsq(basis * sw, radial * sw[:, 0], rcond=None)[0]
+    return phase, radial - basis @ coef, weights, closed
+
+
+def surface_shape(problem, array: np.ndarray) -> tuple[float, float]:
+    """(amplitude [mm], wrinkle count) of the surface profile (:func:`surface_profile`): the amplitude is
+    half its peak-to-trough, the count its dominant wrinkle count with the definition of N_c (half-waves / 2
+    along an open surface, the integer wavenumber around a closed one); 0 for a profile at roundoff
+    (amplitude below 1e-9 of the surface's length), e.g. on the unbuckled path of a flat film."""
+    pos, prof, weights, closed = surface_profile(problem, array)
+    if prof.size < 3:
+        return 0.0, 0.0
+    amplitude = 0.5 * float(prof.max() - prof.min())
+    if amplitude <= SHAPE_FLOOR * problem.surface_length:
+        return amplitude, 0.0
+    if closed:
+        return amplitude, float(circumferential_wavenumber(pos, prof, weights))
+    return amplitude, wrinkle_count(pos, prof, float(pos.max() - pos.min()))

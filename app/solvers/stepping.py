@@ -22,7 +22,7 @@ import ufl
 from mpi4py import MPI
 
 from app import compat
-from app.solvers.newton import NewtonSolver, SolverSettings
+from app.solvers.newton import NewtonResult, NewtonSolver, SolverSettings
 from app.solvers.step_control import StepControl
 
 
@@ -49,8 +49,21 @@ class TimeSettings:
         return StepControl(self.tolerance, self.dt_min, self.dt_max, self.adaptive, self.dt_initial)
 
 
+ENERGY_INCREASED = -101  # a minimizer solve whose energy ended above its initial guess's (a rejection)
+
+
 class StepFailure(RuntimeError):
     """The step could not be completed even at the smallest allowed step size."""
+
+
+class ModelLimit(StepFailure):
+    """The branch reached a state the model cannot represent (:mod:`app.onset.contact`): the run ends with
+    the limit's status ("contact" or "inverted")."""
+
+    def __init__(self, limit, t: float):
+        self.limit, self.t = limit, t
+        super().__init__(f"{limit.detail} at t = {t:.6g} s: the model has no contact and no inverted elements, "
+                         f"the branch cannot be followed further")
 
 
 class LostStability(StepFailure):
@@ -70,10 +83,13 @@ class StepRecord:
     inflow: float
     applied_strain: float
     error_estimate: float = float("nan")
+    amplitude_mm: float = 0.0  # the surface's wrinkle amplitude (app.onset.wrinkles.surface_shape)
+    wrinkle_count: float = 0.0
+    energy: float = float("nan")  # stored energy of the state (Problem.stored_energy)
     extra: dict = field(default_factory=dict)
 
     COLUMNS = ("step", "time", "dt", "newton_its", "growth_mm", "mu_bar", "fluid_volume", "inflow",
-               "applied_strain", "error_estimate")
+               "applied_strain", "error_estimate", "amplitude_mm", "wrinkle_count", "energy")
 
 
 @dataclass
@@ -99,6 +115,7 @@ class TimeStepper:
         self.end = time.end
         self.max_steps = time.max_steps
         self.control = time.step_control()
+        self._solver_settings = solver
         self.solver = NewtonSolver(problem.forms.residual, problem.forms.hessian, problem.bcs, problem.w, solver,
                                    problem.comm, fields={"u": problem.u_dofs, "q": problem.q_dofs})
         self.log = log or (lambda msg: None)
@@ -120,6 +137,25 @@ class TimeStepper:
         self._volume0 = None
         self.uptake_rate = float("nan")  # the last relative uptake rate at_equilibrium computed
         self._setup_error_form()
+        self.minimizing = False  # past an onset with stability.after_onset = "branch": follow_minimizers
+        self.energy_rejections = 0  # minimizer solves whose energy ended above the initial guess's
+        self.limits = None  # app.onset.contact.ModelLimits once minimizing
+
+    def follow_minimizers(self) -> None:
+        """From now on every step minimizes Pi^tau (app.solvers.minimizer.MinimizingNewton): the state past
+        an onset. Newton's counters carry over; the run also checks for self-contact and inverted cells."""
+        if self.minimizing:
+            return
+        from app.onset.contact import ModelLimits
+        from app.solvers.minimizer import MinimizingNewton
+
+        p, old = self.p, self.solver
+        self.solver = MinimizingNewton(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w,
+                                       self._solver_settings, p.comm)
+        self.solver.set_counters(old.counters())
+        old.destroy()
+        self.minimizing = True
+        self.limits = ModelLimits(p)
 
     # --- error estimate --------------------------------------------------------------------
 
@@ -161,12 +197,16 @@ class TimeStepper:
         """What a checkpoint needs besides a :class:`Snapshot` to continue identically
         (:mod:`app.io.checkpoint`): the summary's counters, the equilibrium test's volumes, Newton's scale."""
         return {"rejected": self.rejected, "failed_solves": self.failed_solves, "volume": self._volume,
-                "volume0": self._volume0, "uptake_rate": self.uptake_rate, "newton": self.solver.counters()}
+                "volume0": self._volume0, "uptake_rate": self.uptake_rate, "newton": self.solver.counters(),
+                "minimizing": self.minimizing, "energy_rejections": self.energy_rejections}
 
     def set_counters(self, c: dict) -> None:
         self.rejected, self.failed_solves = c["rejected"], c["failed_solves"]
         self._volume = tuple(c["volume"]) if c["volume"] is not None else None
         self._volume0, self.uptake_rate = c["volume0"], c["uptake_rate"]
+        if c.get("minimizing"):
+            self.follow_minimizers()
+        self.energy_rejections = c.get("energy_rejections", 0)
         self.solver.set_counters(c["newton"])
 
     # --- one step --------------------------------------------------------------------------
@@ -200,6 +240,12 @@ class TimeStepper:
         p.set_time(self.t + dt, dt)
         dQ_pred = self._predict(dt)
         res = self.solver.solve()
+        if res.converged and self.minimizing:
+            from app.solvers.minimizer import energy_decreased
+
+            if not energy_decreased(self.solver.last):
+                self.energy_rejections += 1
+                res = NewtonResult(False, res.iterations, ENERGY_INCREASED, res.residual_norm)
         err = float("nan")
         if res.converged and self.history_valid:
             err = dt / (2 * dt + self.dt_prev) * self._fluid_error(dQ_pred)
@@ -219,6 +265,8 @@ class TimeStepper:
             if not res.converged:
                 self.failed_solves += 1
                 failures += 1
+                if self.minimizing:
+                    self._check_limits(self.p.w.x.array, self.t + dt)
                 if res.reason == last_reason and not diagnosed:
                     diagnosed = True
                     self._diagnose(dt, res.reason, failures)
@@ -238,6 +286,15 @@ class TimeStepper:
                 continue
             break
         return self._accept(dt, res.iterations, err)
+
+    def _check_limits(self, array: np.ndarray, t: float) -> None:
+        """On the branch: raise :class:`ModelLimit` if ``array`` (a state or a failed step's last iterate)
+        has an inverted cell or a self-intersecting surface."""
+        if not np.all(np.isfinite(array[self.p.u_dofs])):
+            return
+        limit = self.limits(array)
+        if limit is not None:
+            raise ModelLimit(limit, t)
 
     def _diagnose(self, dt: float, reason: int, failures: int) -> None:
         """After a step failed at 4 dt and again at dt for the same reason: is the last converged state
@@ -263,12 +320,12 @@ class TimeStepper:
             if nneg > 0:
                 found.append(f"{what} has {nneg} negative eigenvalue(s)")
                 break
-        if found:
+        if found and not self.minimizing:
             raise LostStability(
                 f"the state lost stability at t = {self.t:.6g} s ({found[0]}; Newton failed {failures} times on "
                 f"this step, the last two with SNES reason {reason}): the fundamental path cannot be followed; "
                 f"enable the stability test (stability.enabled = true, stability.criterion = drained) to locate "
-                f"the onset and its mode (hydrobuckle does not follow post-buckling paths)")
+                f"the onset and its mode, and stability.after_onset = \"branch\" to follow the buckled branch")
 
     def at_equilibrium(self, rec: StepRecord) -> bool:
         """time.stop_at_equilibrium: whether the run has reached its equilibrium with the held loading.
@@ -293,6 +350,10 @@ class TimeStepper:
 
     def _accept(self, dt: float, its: int, err: float) -> StepRecord:
         p = self.p
+        if self.minimizing:
+            u = p.state.x.array.copy()
+            u[p.u_dofs] = p.w.x.array[p.u_dofs]
+            self._check_limits(u, self.t + dt)
         influx = p.step_influx()
         u_old = p.state.x.array[p.u_dofs].copy()
         p.accept()
@@ -310,8 +371,9 @@ class TimeStepper:
 
     def record(self, dt: float, its: int, err: float) -> StepRecord:
         p = self.p
+        amplitude, count = p.surface_shape()
         return StepRecord(self.step, self.t, dt, its, p.growth(), p.loading.mu_bar(self.t), p.fluid_volume(),
-                          self.inflow, p.loading.applied_strain(self.t), err)
+                          self.inflow, p.loading.applied_strain(self.t), err, amplitude, count, p.stored_energy())
 
     def initial_record(self) -> StepRecord:
         return self.record(0.0, 0, float("nan"))

@@ -16,7 +16,8 @@ from app.io.output import OutputSettings, ResultWriter, versions
 from app.model.problem import Problem
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
-from app.solvers.stepping import StepFailure, StepRecord, TimeSettings, TimeStepper
+from app.onset.branching import reference_length
+from app.solvers.stepping import ModelLimit, StepFailure, StepRecord, TimeSettings, TimeStepper
 
 ASSUMPTIONS = (
     "material.shear_modulus (gamma_s) defaults to 0.1 MPa: the paper gives only ratios gamma_f/gamma_s",
@@ -77,7 +78,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
             problem = Problem.from_config(cfg, comm)
         stepper = TimeStepper(problem, settings.time, settings.solver, log=log.info)
         tracker = onset_tracker(problem, stepper, settings.stability, log=log.info, detail=detail,
-                                on_first_crossing=lambda crossing: writer.write_mode(problem, crossing))
+                                on_first_crossing=lambda crossing: writer.write_mode(problem, crossing),
+                                reference_length=reference_length(cfg))
     watch.arm()  # gmsh reset SIGINT's handler
     checkpoints = checkpoint.Checkpoints(outdir, cfg, settings.output.checkpoint_every, log=log.info)
     if resume:
@@ -132,6 +134,9 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
             if checkpoints.due(rec.step):
                 with timing.timed("output"):
                     checkpoints.write(problem, stepper, tracker, writer.rows)
+    except ModelLimit as err:
+        status, message = err.limit.status, str(err)
+        log.info(f"hydrobuckle: {message}")
     except StepFailure as err:
         status, message = "failed", str(err)
         log.info(f"hydrobuckle: solver failure: {message}")
@@ -168,7 +173,8 @@ def summarize(status: str, message: str, last: dict, problem, stepper, tracker, 
     return {
         "status": status,
         "message": message,
-        "final": {"time": last["time"], "growth_mm": last["growth_mm"]},
+        "final": {"time": last["time"], "growth_mm": last["growth_mm"], "amplitude_mm": last["amplitude_mm"],
+                  "wrinkle_count": last["wrinkle_count"]},
         "mesh": {"cells": problem.cells(), "dofs": problem.dofs(), **problem.tm.info},
         "materials": {k: {**m.as_dict(), "s0": m.s0, "mu0": m.mu0} for k, m in problem.materials.items()},
         "ranks": problem.comm.size,
@@ -178,6 +184,7 @@ def summarize(status: str, message: str, last: dict, problem, stepper, tracker, 
         "failed_solves": stepper.failed_solves,
         "linear_solver": {"kind": settings.solver.linear, "krylov_iterations": stepper.linear_iterations},
         **tracker.tests_summary(),
+        **tracker.branch_summary(),
         "wall_time_s": wall,
         "versions": versions(),
         "assumptions": list(ASSUMPTIONS),

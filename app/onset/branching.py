@@ -1,0 +1,157 @@
+"""Switching onto the buckled branch at a located crossing (``stability.after_onset = "branch"``).
+
+At the crossing's unstable end the state is perturbed along the crossing's mode, scaled so that the
+mode's surface amplitude (:func:`app.onset.wrinkles.surface_shape`) is ``stability.imperfection`` times the
+film thickness, and the stepper switches to the minimizing step solver
+(:class:`app.solvers.minimizer.MinimizingNewton`), which from then on cannot settle on the unbuckled saddle.
+
+What the perturbation must contain depends on the criterion (docs/postbuckling.md). A mode that moves
+fluid (the drained one) is a displacement *and* a change of each cell's fluid content; a displacement alone
+would be undone by the next step, whose potential does not depend on the previous displacement. The drained
+mode's content change c = -K_cc^-1 K_cu u (the eliminated block of :class:`~app.solvers.stability.DrainedOperator`)
+is carried by a flux increment dQ added to the accumulated flux Q_n: dQ minimizes the quadratic of K_tau
+with the displacement held at the mode, for a tau far beyond the run's time, which makes Div dQ = c up to
+(cell diffusion time / tau) and picks the least-dissipative such flux. The fluid it brings in through the
+permeable surface is added to the run's inflow, so the history's balance holds. Undrained modes (fluid
+frozen) and problems without diffusion need the displacement only; "rate" modes carry their flux already.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from petsc4py import PETSc
+
+from app import compat
+from app.onset.wrinkles import surface_profile, surface_shape
+from app.solvers import mumps
+from app.solvers.stability import RateOperator
+
+TAU_FACTOR = 1e8  # the flux of a content change: tau = this x (elapsed time + ramp scale), see the docstring
+
+
+@dataclass
+class Switch:
+    """One switch onto a branch: where, with which mode, how large."""
+
+    time: float
+    growth_mm: float
+    wrinkle_count: float
+    imperfection_mm: float
+    with_flux: bool
+    inflow: float  # fluid volume the perturbation brought in
+
+    def as_dict(self) -> dict:
+        return {"time": self.time, "growth_mm": self.growth_mm, "wrinkle_count": self.wrinkle_count,
+                "imperfection_mm": self.imperfection_mm, "with_flux": self.with_flux, "inflow": self.inflow}
+
+
+def reference_length(cfg: dict) -> float:
+    """The length stability.imperfection is a fraction of: the film thickness, or (kinds without one) the
+    element size."""
+    return float(cfg["geometry"].get("film_thickness") or cfg["mesh"]["element_size"])
+
+
+def oriented(problem, mode: np.ndarray) -> np.ndarray:
+    """The mode with a sign fixed by its surface profile (the profile's largest excursion positive, the first
+    of equal ones), so that a positive imperfection means the same on any number of ranks."""
+    _, prof, _, _ = surface_profile(problem, mode)
+    if prof.size and prof[int(np.argmax(np.abs(prof)))] < 0:
+        return -mode
+    return mode
+
+
+class BranchSwitcher:
+    """Applies the perturbation of :mod:`app.onset.branching` to a problem's converged state."""
+
+    def __init__(self, problem, stepper, criterion: str, imperfection: float, length: float, log=None):
+        self.p, self.stepper, self.criterion = problem, stepper, criterion
+        self.imperfection, self.length = imperfection, length
+        self.log = log or (lambda msg: None)
+        self.switches: list[Switch] = []
+
+    def switch(self, crossing) -> Switch:
+        """Perturb the current state (the crossing's unstable end) along ``crossing.mode`` and switch the
+        stepper to minimizers."""
+        p, st = self.p, self.stepper
+        mode = oriented(p, crossing.mode)
+        amplitude, _ = surface_shape(p, mode)
+        if amplitude <= 0:
+            amplitude = float(np.max(np.abs(mode[p.u_dofs]))) or 1.0
+        scale = self.imperfection * self.length / amplitude
+        delta = scale * mode
+        with_flux = self.criterion == "drained" and p.diffusion  # the drained mode is a displacement only
+        if with_flux:
+            delta[p.q_dofs] = self.content_flux(delta)
+        before = p.fluid_volume()
+        s = p.state.x.array
+        s[p.u_dofs] += delta[p.u_dofs]
+        s[p.q_dofs] += delta[p.q_dofs]
+        inflow = p.fluid_volume() - before
+        st.inflow += inflow
+        st.follow_minimizers()
+        rec = Switch(st.t, p.growth(), crossing.wrinkle_count, abs(self.imperfection) * self.length, with_flux, inflow)
+        self.switches.append(rec)
+        self.log(f"  branch switch at t = {st.t:.6f} s: mode (N = {crossing.wrinkle_count:g}) added with surface "
+                 f"amplitude {1e3 * rec.imperfection_mm:.4g} um" + (" (with its fluid content)" if with_flux else "")
+                 + "; following the buckled branch")
+        return rec
+
+    def content_flux(self, delta: np.ndarray) -> np.ndarray:
+        """The flux dQ whose divergence is the drained content change of displacement ``delta`` (local q part)."""
+        p = self.p
+        tau = TAU_FACTOR * max(self.stepper.t, self.stepper.dt_prev, 1e-12)
+        op = RateOperator(p, tau)
+        ksp = None
+        options = mumps.PrefixedOptions("hbbranch", mumps.direct("cholesky", {}))
+        try:
+            op.matrix()
+            A = op.A
+            n_owned = compat.owned_size(p.W)
+            fixed = np.zeros(n_owned, dtype=bool)
+            fixed[compat.owned_bc_dofs(p.bcs, p.W)] = True
+            is_q = np.zeros(n_owned, dtype=bool)
+            is_q[p.q_dofs[p.q_dofs < n_owned]] = True
+            free_q = compat.owned_index_set(p.W, np.flatnonzero(is_q & ~fixed), p.comm)
+            z = A.createVecRight()
+            z.array[:] = 0.0
+            u_owned = p.u_dofs[p.u_dofs < n_owned]
+            z.array[u_owned] = delta[u_owned]
+            r = A.createVecLeft()
+            A.mult(z, r)
+            Kqq = A.createSubMatrix(free_q, free_q)
+            Kqq.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+            rhs = r.getSubVector(free_q)
+            b = rhs.copy()
+            r.restoreSubVector(free_q, rhs)
+            b.scale(-1.0)
+            x = b.duplicate()
+            ksp = PETSc.KSP().create(p.comm)
+            ksp.setOptionsPrefix(options.prefix)
+            ksp.setFromOptions()
+            ksp.setOperators(Kqq)
+            ksp.solve(b, x)
+            full = A.createVecRight()
+            full.set(0.0)
+            sub = full.getSubVector(free_q)
+            x.copy(sub)
+            full.restoreSubVector(free_q, sub)
+            f = compat.Function(p.W)
+            f.x.array[:n_owned] = full.array
+            f.x.scatter_forward()
+            out = f.x.array[p.q_dofs].copy()
+            for obj in (z, r, Kqq, b, x, full, free_q):
+                obj.destroy()
+            return out
+        finally:
+            options.clear()
+            if ksp is not None:
+                ksp.destroy()
+            op.destroy()
+
+    def export_state(self) -> dict:
+        return {"switches": [s.as_dict() for s in self.switches]}
+
+    def import_state(self, state: dict) -> None:
+        self.switches = [Switch(**s) for s in state.get("switches", ())]

@@ -1,0 +1,115 @@
+"""Where the model ends on a buckled branch: the surface folding onto itself, or an element inverting.
+
+The model has no contact: once wrinkles fold into a crease, the permeable surface passes through itself
+and the states that follow mean nothing. Nor can a cell with det F <= 0 be represented (the energy's
+ln J is undefined there). A run that follows the branch checks every accepted state for both and ends
+with status "contact" or "inverted", saying when and where, instead of a Newton failure
+(docs/postbuckling.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from app import compat
+from app.onset.wrinkles import boundary_displacement
+
+
+@dataclass
+class Limit:
+    """A state the model cannot represent: which ("contact" / "inverted"), where, and a sentence."""
+
+    status: str
+    where: tuple[float, float]
+    detail: str
+
+
+def _segments_cross(p: np.ndarray, closed: bool) -> tuple[int, int] | None:
+    """The first pair (i, j) of non-adjacent segments of the polyline p (N, 2) that intersect, else None."""
+    q = np.roll(p, -1, axis=0) if closed else p[1:]
+    a = p if closed else p[:-1]
+    n = len(a)
+    if n < 4:
+        return None
+    d = q - a  # segment i: a[i] + s d[i], s in [0, 1]
+
+    def cross(u, v):
+        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+    r = a[None, :, :] - a[:, None, :]  # a[j] - a[i]
+    den = cross(d[:, None, :], d[None, :, :])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = cross(r, d[None, :, :]) / den
+        t = cross(r, d[:, None, :]) / den
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    gap = np.abs(i - j)
+    if closed:
+        gap = np.minimum(gap, n - gap)
+    hit = (gap > 1) & (den != 0) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
+    found = np.argwhere(np.triu(hit))
+    return (int(found[0, 0]), int(found[0, 1])) if len(found) else None
+
+
+def surface_contact(problem, array: np.ndarray) -> Limit | None:
+    """Whether the deformed permeable surface of ``array`` intersects itself (same verdict on every rank)."""
+    coords, disp = boundary_displacement(problem, array, problem.geo.facets_with_role("permeable"))
+    if problem.geo.wrinkles == "around":
+        rel = coords - coords.mean(axis=0)
+        order = np.argsort(np.arctan2(rel[:, 1], rel[:, 0]))
+        closed = True
+    else:
+        centre = coords.mean(axis=0)
+        _, _, vt = np.linalg.svd(coords - centre, full_matrices=False)
+        order = np.argsort((coords - centre) @ vt[0])
+        closed = False
+    x = (coords + disp)[order]
+    pair = _segments_cross(x, closed)
+    if pair is None:
+        return None
+    where = tuple(float(v) for v in coords[order][pair[0]])
+    return Limit("contact", where, f"the surface folds onto itself (self-contact, a crease) near the reference "
+                                   f"point ({where[0]:.4g}, {where[1]:.4g}) mm")
+
+
+class InversionCheck:
+    """The smallest det F over the cells (at each cell's midpoint) of a mixed-space array."""
+
+    def __init__(self, problem):
+        self.p = problem
+        self.V0 = compat.scalar_space(problem.domain, "DG", 0)
+        self._u = compat.Function(problem.V_u)
+        self._J = compat.Function(self.V0)
+        self._expr = compat.expression(ufl.det(ufl.Identity(2) + ufl.grad(self._u)), self.V0)
+        self._mid = None
+
+    def __call__(self, array: np.ndarray) -> Limit | None:
+        p = self.p
+        self._u.x.array[:] = array[p.u_dofs]
+        compat.interpolate(self._J, self._expr)
+        n_owned = compat.num_owned_cells(p.domain)
+        J = self._J.x.array[:n_owned]
+        i = int(np.argmin(J)) if n_owned else -1
+        local = float(J[i]) if n_owned else np.inf
+        jmin = p.comm.allreduce(local, op=MPI.MIN)
+        if jmin > 0:
+            return None
+        if self._mid is None:
+            self._mid = self.V0.tabulate_dof_coordinates()[:, :2]
+        mine = tuple(float(v) for v in self._mid[i]) if n_owned and local == jmin else None
+        where = next(w for w in p.comm.allgather(mine) if w is not None)
+        return Limit("inverted", where, f"an element inverts (det F = {jmin:.3g}) at ({where[0]:.4g}, {where[1]:.4g}) mm")
+
+
+class ModelLimits:
+    """Both checks of an array (a converged state or a failed step's last iterate)."""
+
+    def __init__(self, problem):
+        self.p = problem
+        self.inversion = InversionCheck(problem)
+
+    def __call__(self, array: np.ndarray) -> Limit | None:
+        return self.inversion(array) or surface_contact(self.p, array)

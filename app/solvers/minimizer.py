@@ -1,0 +1,192 @@
+"""The step solver past an onset: Newton that finds a local *minimizer* of the incremental potential.
+
+Past a stability crossing K is indefinite along the buckling mode, and plain Newton converges to
+whatever stationary point is nearest, the unbuckled saddle included. This solver is the same SNES
+(:class:`app.solvers.newton.NewtonSolver`, MUMPS LDL^T) with three changes (docs/postbuckling.md):
+
+- **objective**: SNES's objective is Pi^tau itself (``CompiledForms.energy``), and the line search is
+  backtracking on it (``bt``): every accepted iterate lowers the energy;
+- **inertia-corrected direction**: after assembling K the solver factorizes it and reads the
+  inertia of the LDL^T factor; while it shows negative pivots, K is shifted by sigma |diag K| (a
+  Jacobi-scaled shift, the same for every unit system) and refactorized, sigma growing tenfold. The
+  direction K_sigma^-1 R is then a descent direction of Pi. The factor SNES then solves with is the one
+  computed here (PETSc does not refactorize an unchanged matrix), so an unshifted iteration costs one
+  factorization, as before;
+- **verdicts**: the unshifted negative-pivot count of the last factorization tells whether the
+  converged state is a minimizer (none) or a saddle (some), and the energy at the initial guess and at
+  the solution are kept: :attr:`last` reports both.
+
+Near a minimizer energy differences fall below the roundoff of the assembled energy; a line search
+that then fails at a residual already below ``sqrt(rtol)`` times the problem's scale is finished with
+plain Newton steps (K is positive definite there), not reported as a failure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from petsc4py import PETSc
+
+from app import compat, timing
+from app.solvers.newton import NewtonResult, NewtonSolver, SolverSettings
+
+SHIFT_START = 1e-6  # first trial shift (times |diag K|) of a factorization with negative pivots
+SHIFT_MAX = 1e6  # beyond this the direction is a scaled gradient step already
+ITERATION_FACTOR = 4  # escaping a saddle may take more iterations than an ordinary step
+
+
+@dataclass
+class MinimizerVerdict:
+    """What the last solve found besides convergence."""
+
+    negatives: int = 0  # negative pivots of the unshifted K at the last Newton iterate (0: a minimizer)
+    energy_start: float = float("nan")  # Pi at the initial guess (with the Dirichlet values)
+    energy_end: float = float("nan")  # Pi at the solution
+    shifted: int = 0  # factorizations with a shift in this solve
+    polished: bool = False  # the energy line search gave way to plain Newton near the minimizer
+
+
+class MinimizingNewton(NewtonSolver):
+    """Energy-decreasing, inertia-corrected Newton on Pi^tau (see the module docstring)."""
+
+    def __init__(self, energy, residual, hessian, bcs, w, settings: SolverSettings, comm, fields=None):
+        settings = dataclasses.replace(settings, line_search="bt", max_it=ITERATION_FACTOR * settings.max_it,
+                                       factorization="cholesky", linear="direct")
+        super().__init__(residual, hessian, bcs, w, settings, comm, fields)
+        self.energy_form = energy
+        self.snes.setObjective(self._objective)
+        self.rtol = settings.rtol
+        self.last = MinimizerVerdict()
+        self.sigma = 0.0  # the last shift that gave no negative pivots (a start for the next one)
+        self.shifted_factorizations = 0
+        self.saddles = 0  # solves that converged with negative pivots left
+        self.polishes = 0
+        self._diag = None
+
+    # --- SNES callbacks ------------------------------------------------------------------------
+
+    def _objective(self, snes, x):
+        with timing.timed("assembly"):
+            self._sync_solution(x)
+            return compat.assemble_scalar(self.energy_form, self.comm)
+
+    def _factor_negatives(self, ksp) -> int:
+        ksp.getPC().setUp()
+        nneg, _, _ = ksp.getPC().getFactorMatrix().getInertia()
+        return int(nneg)
+
+    def _jacobian(self, snes, x, J, P):
+        super()._jacobian(snes, x, J, P)
+        ksp = snes.getKSP()
+        ksp.setOperators(J, P)
+        nneg = self._factor_negatives(ksp)
+        self.last.negatives = nneg
+        if nneg == 0:
+            self.sigma = 0.0
+            return
+        d = J.getDiagonal()
+        d.abs()
+        floor = d.max()[1] * 1e-12
+        d.array[d.array < floor] = floor
+        sigma, applied = max(SHIFT_START, self.sigma / 10.0), 0.0
+        step = d.duplicate()
+        try:
+            while True:
+                d.copy(step)
+                step.scale(sigma - applied)
+                J.setDiagonal(step, addv=PETSc.InsertMode.ADD_VALUES)
+                J.assemble()
+                applied = sigma
+                self.shifted_factorizations += 1
+                self.last.shifted += 1
+                if self._factor_negatives(ksp) == 0 or sigma >= SHIFT_MAX:
+                    break
+                sigma *= 10.0
+        finally:
+            step.destroy()
+            d.destroy()
+        self.sigma = sigma
+
+    def _converged(self, snes, it, norms):
+        """The default test of :class:`NewtonSolver` without its divergence rule: leaving a saddle the
+        residual grows by orders of magnitude while the energy falls."""
+        out = super()._converged(snes, it, norms)
+        if out == PETSc.SNES.ConvergedReason.DIVERGED_DTOL:
+            return PETSc.SNES.ConvergedReason.CONVERGED_ITERATING
+        return out
+
+    # --- one solve -----------------------------------------------------------------------------
+
+    def solve(self) -> NewtonResult:
+        """Minimize Pi from the current ``w`` (its Dirichlet values set first, so that every iterate is
+        admissible and the energies compare); ``w`` holds the result, :attr:`last` the verdict."""
+        self.last = MinimizerVerdict()
+        x = compat.function_vector(self.w)
+        compat.set_dirichlet_values(x, self.bcs)
+        x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        self.last.energy_start = compat.assemble_scalar(self.energy_form, self.comm)
+        res = super().solve()
+        if not res.converged and res.reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH:
+            res = self._polish(res)
+        if res.converged:
+            self.last.energy_end = compat.assemble_scalar(self.energy_form, self.comm)
+            if self.last.negatives:
+                self.saddles += 1
+        return res
+
+    def _polish(self, failed: NewtonResult) -> NewtonResult:
+        """A line search that failed close to a minimizer (residual below sqrt(rtol) x the problem's scale,
+        K without negative pivots): finish with plain Newton steps from the last iterate, converged by
+        the same test (:meth:`NewtonSolver._converged`)."""
+        scale = self.residual_scale or 0.0
+        if not (math.isfinite(failed.residual_norm) and failed.residual_norm <= math.sqrt(self.rtol) * scale
+                and self.last.negatives == 0):
+            return failed
+        snes, x, b, A = self.snes, self.x, self.b, self.A
+        ksp = snes.getKSP()
+        dx = x.duplicate()
+        reason, its, fnorm = failed.reason, 0, failed.residual_norm
+        try:
+            self._residual(snes, x, b)
+            fnorm = b.norm()
+            self._converged(snes, 0, (x.norm(), 0.0, fnorm))
+            self._ttol = failed.residual_norm * self.rtol
+            for its in range(1, 6):
+                self._jacobian(snes, x, A, A)
+                if self.last.negatives:
+                    break
+                ksp.solve(b, dx)
+                x.axpy(-1.0, dx)
+                self._residual(snes, x, b)
+                fnorm = b.norm()
+                reason = self._converged(snes, its, (x.norm(), dx.norm(), fnorm))
+                if reason != PETSc.SNES.ConvergedReason.CONVERGED_ITERATING:
+                    break
+        finally:
+            dx.destroy()
+        converged = reason > 0 and math.isfinite(fnorm)
+        if converged:
+            self._sync_solution(x)
+            self.polishes += 1
+            self.last.polished = True
+        self.last_iterations = failed.iterations + its
+        return NewtonResult(converged, failed.iterations + its, int(reason), float(fnorm))
+
+    def counters(self) -> dict:
+        return {**super().counters(), "sigma": self.sigma, "shifted_factorizations": self.shifted_factorizations,
+                "saddles": self.saddles, "polishes": self.polishes}
+
+    def set_counters(self, c: dict) -> None:
+        super().set_counters(c)
+        self.sigma = c.get("sigma", 0.0)
+        self.shifted_factorizations = c.get("shifted_factorizations", 0)
+        self.saddles, self.polishes = c.get("saddles", 0), c.get("polishes", 0)
+
+
+def energy_decreased(verdict: MinimizerVerdict) -> bool:
+    """The step's energy test: Pi at the solution not above Pi at the initial guess (up to roundoff)."""
+    a, b = verdict.energy_start, verdict.energy_end
+    return bool(np.isfinite(a) and np.isfinite(b) and b <= a + 1e-12 * max(1.0, abs(a)))
