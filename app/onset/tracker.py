@@ -137,15 +137,19 @@ class OnsetTracker:
             self.count += 1
             lo = crossing.hi if crossing.hi_count == self.count else crossing.lo
             stop = self.settings.policy.stops(len(self.crossings))
-            if stop:
+            if stop or self.branch is not None:
                 break
-        self.count = max(self.count, nneg)
-        self.stepper.restore(unstable)
         if not stop and self.branch is not None:
-            self.branch.switch(self.crossings[-1])
+            # the branch starts at the last accepted state (the bracket's unstable end, within one step of the
+            # crossing: the history stays monotone in time), perturbed along the first crossing's mode; further
+            # crossings of the unbuckled path up to that state are not located: the run has left that path
+            self.stepper.restore(unstable)
+            self.branch.switch(crossing)
             self.screen.screening = "exact"  # the minimizer's factors are shifted: no screening with them
             self.count = self.screen.start()  # the perturbed state's count is the branch's reference
             return False
+        self.count = max(self.count, nneg)
+        self.stepper.restore(unstable)
         if not stop:
             self.screen.restart(unstable)
         return stop
