@@ -7,7 +7,10 @@ from mpi4py import MPI
 
 from app.solvers.stepping import StepRecord
 
-COLUMNS = [c for c in StepRecord.COLUMNS if c not in ("step", "newton_its", "error_estimate")]
+# the surface's amplitude and wrinkle count are roundoff on these unbuckled paths (tests/test_postbuckling.py
+# compares them on a branch)
+COLUMNS = [c for c in StepRecord.COLUMNS
+           if c not in ("step", "newton_its", "error_estimate", "amplitude_mm", "wrinkle_count")]
 
 
 def _history(cfg, comm):

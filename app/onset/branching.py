@@ -54,12 +54,15 @@ def reference_length(cfg: dict) -> float:
 
 
 def oriented(problem, mode: np.ndarray) -> np.ndarray:
-    """The mode with a sign fixed by its surface profile (the profile's largest excursion positive, the first
-    of equal ones), so that a positive imperfection means the same on any number of ranks."""
-    _, prof, _, _ = surface_profile(problem, mode)
-    if prof.size and prof[int(np.argmax(np.abs(prof)))] < 0:
-        return -mode
-    return mode
+    """The mode with a sign fixed by its surface profile: the first sample (in order along the surface, or of
+    phase around it) whose excursion exceeds half the largest is positive. A positive imperfection then means
+    the same on any number of ranks; the largest excursion alone would not do: a sinusoid's crest and trough
+    are equal up to roundoff."""
+    _, prof, _, _ = surface_profile(problem, mode, outward=False)
+    if not prof.size:
+        return mode
+    big = np.abs(prof) > 0.5 * np.max(np.abs(prof))
+    return -mode if prof[int(np.argmax(big))] < 0 else mode
 
 
 class BranchSwitcher:
@@ -91,6 +94,7 @@ class BranchSwitcher:
         inflow = p.fluid_volume() - before
         st.inflow += inflow
         st.follow_minimizers()
+        relaxed = st.relax()  # without diffusion: settle onto the branch at the onset's load
         rec = Switch(st.t, p.growth(), crossing.wrinkle_count, abs(self.imperfection) * self.length, with_flux, inflow)
         self.switches.append(rec)
         self.log(f"  branch switch at t = {st.t:.6f} s: mode (N = {crossing.wrinkle_count:g}) added with surface "

@@ -121,7 +121,8 @@ def along_profile(coords: np.ndarray, disp: np.ndarray):
     """Position along an open, nearly straight surface, the displacement normal to it, and its length."""
     centre = coords.mean(axis=0)
     _, _, vt = np.linalg.svd(coords - centre, full_matrices=False)
-    tangent, normal = vt[0], vt[1]
+    tangent = vt[0] if vt[0][np.argmax(np.abs(vt[0]))] > 0 else -vt[0]  # a sign independent of the node order
+    normal = np.array([-tangent[1], tangent[0]])
     t = (coords - centre) @ tangent
     order = np.argsort(t)
     return t[order], (disp @ normal)[order], float(t.max() - t.min())
@@ -159,11 +160,12 @@ def mode_wrinkle_count(problem, mode: np.ndarray) -> float:
 SHAPE_FLOOR = 1e-9  # amplitudes below this fraction of the surface's length are roundoff: count 0
 
 
-def surface_profile(problem, array: np.ndarray):
+def surface_profile(problem, array: np.ndarray, outward: bool = True):
     """The permeable surface's normal displacement in ``array`` with its rigid and uniform parts removed:
     (position, profile, weights, closed). Open surfaces (bilayer): position along the surface [mm], the
     normal displacement minus its least-squares mean and linear trend (a uniform swelling and a tilt),
-    signed so that the mean displacement is >= 0 (outwards for a swelling body). Closed surfaces (tubes):
+    signed so that the mean displacement is >= 0 (outwards for a swelling body; with ``outward = False`` the
+    sign is that of a fixed normal, the tangent turned anticlockwise, for a mode whose mean means nothing). Closed surfaces (tubes):
     phase 0..2 pi, the radial displacement minus its weighted mean and its n = 1 Fourier part (a uniform
     swelling and a rigid translation), with the arc-length quadrature weights."""
     coords, disp = boundary_displacement(problem, array, problem.geo.facets_with_role("permeable"))
@@ -173,7 +175,7 @@ def surface_profile(problem, array: np.ndarray):
         closed = True
     else:
         phase, radial, _ = along_profile(coords, disp)
-        if radial.mean() < 0:
+        if outward and radial.mean() < 0:
             radial = -radial
         weights = np.ones_like(phase)
         basis = np.stack([np.ones_like(phase), phase], axis=1)

@@ -157,6 +157,23 @@ class TimeStepper:
         self.minimizing = True
         self.limits = ModelLimits(p)
 
+    def relax(self) -> bool:
+        """Minimize Pi at the current time from the current state, without advancing: a perturbed state settles
+        onto the branch its perturbation points to, before any load increment (whose own residual would
+        compete with the perturbation's). Only for problems without diffusion, where tau does not enter;
+        False (state unchanged) if the solve fails."""
+        p = self.p
+        if p.diffusion:
+            return False
+        p.set_time(self.t, self.dt_prev)
+        w = p.w.x.array
+        w[:] = 0.0
+        w[p.u_dofs] = p.state.x.array[p.u_dofs]
+        res = self.solver.solve()
+        if res.converged:
+            p.state.x.array[p.u_dofs] = w[p.u_dofs]
+        return res.converged
+
     # --- error estimate --------------------------------------------------------------------
 
     def _setup_error_form(self):
