@@ -231,6 +231,21 @@ class ResultWriter:
 
         history_plot(self.rows, self.outdir / "history.png", critical)
 
+    def plot_branch(self, profiles: list, critical: dict | None, closed: bool) -> None:
+        """After a followed branch: wrinkles.png and amplitude.png (if plots are written) and the surface
+        profiles themselves, profiles.npz (growth, time, position and profile of every step on the branch)."""
+        if not self.rank0 or not profiles:
+            return
+        np.savez_compressed(self.outdir / "profiles.npz", growth_mm=np.array([p[0] for p in profiles]),
+                            time=np.array([p[1] for p in profiles]),
+                            position=np.array([p[2] for p in profiles]), profile=np.array([p[3] for p in profiles]))
+        if not self.settings.plot:
+            return
+        from app.io.plots import amplitude_plot, wrinkles_plot
+
+        wrinkles_plot(profiles, critical, closed, self.outdir / "wrinkles.png")
+        amplitude_plot(self.rows, critical, self.outdir / "amplitude.png")
+
     def close(self) -> None:
         if self._xdmf is not None:
             self._xdmf.close()

@@ -6,6 +6,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 
 
 def history_plot(rows: list[dict], path, critical: dict | None = None) -> None:
@@ -236,6 +237,50 @@ def isomode_plot(rows: list[dict], title: str, param: str, path) -> None:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     ax.set_title(f"isomodes: {title}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def wrinkles_plot(profiles: list[tuple], critical: dict | None, closed: bool, path, count: int = 8) -> None:
+    """Surface profiles (the detrended normal displacement, app.onset.wrinkles.surface_profile) at up to
+    ``count`` growths, evenly spaced from the first to the last, each offset by its rank, as wrinkle
+    profiles are shown in experimental papers. ``profiles``: (growth_mm, time, position, profile) tuples."""
+    if not profiles:
+        return
+    pick = np.unique(np.round(np.linspace(0, len(profiles) - 1, min(count, len(profiles)))).astype(int))
+    chosen = [profiles[i] for i in pick]
+    span = max(float(np.ptp(p[3])) for p in chosen) or 1.0
+    fig, ax = plt.subplots(figsize=(8, 1.2 + 0.6 * len(chosen)))
+    for k, (g, t, pos, prof) in enumerate(chosen):
+        x = np.degrees(pos) if closed else pos
+        ax.plot(x, 1e3 * (prof + k * 1.2 * span), lw=1.0, color=plt.cm.viridis(k / max(1, len(chosen) - 1)))
+        ax.text(x.max(), 1e3 * k * 1.2 * span, f"  g = {1e3 * g:.2f} um", va="center", fontsize=8)
+    ax.set_xlabel("angle around the passage [deg]" if closed else "position along the surface [mm]")
+    ax.set_ylabel("normal displacement, detrended and offset [um]")
+    gc = f" (g_c = {1e3 * critical['growth_mm']:.3f} um)" if critical else ""
+    ax.set_title("surface profiles on the followed branch" + gc)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def amplitude_plot(rows: list[dict], critical: dict | None, path) -> None:
+    """Wrinkle amplitude against growth with g_c marked, and the wrinkle count on a second axis."""
+    g = np.array([1e3 * float(r["growth_mm"]) for r in rows])
+    a = np.array([1e3 * float(r["amplitude_mm"]) for r in rows])
+    n = np.array([float(r["wrinkle_count"]) for r in rows])
+    order = np.argsort(g, kind="stable")
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.plot(g[order], a[order], "o-", ms=2.5, color="C0", label="amplitude")
+    if critical:
+        ax.axvline(1e3 * critical["growth_mm"], color="C3", ls="--", lw=1, label="g_c")
+    ax.set_xlabel("growth [um]")
+    ax.set_ylabel("amplitude [um]", color="C0")
+    ax2 = ax.twinx()
+    ax2.step(g[order], n[order], where="post", color="C1", lw=1, label="wrinkle count")
+    ax2.set_ylabel("wrinkle count", color="C1")
+    ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

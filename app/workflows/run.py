@@ -17,6 +17,7 @@ from app.model.problem import Problem
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
 from app.onset.branching import reference_length
+from app.onset.wrinkles import surface_profile
 from app.solvers.stepping import ModelLimit, StepFailure, StepRecord, TimeSettings, TimeStepper
 
 ASSUMPTIONS = (
@@ -107,6 +108,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         writer.write_fields(0.0)
         stepper.at_equilibrium(first)
     status, message = "completed", ""
+    profiles, closed = [], False
     try:
         while not stepper.done():
             sig = watch.requested()  # collective: every rank leaves after the same step
@@ -125,6 +127,9 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
             detail(progress_line(rec))
             if tracker.resolve():
                 break
+            if stepper.minimizing:  # on a followed branch: the surface profile of every state (wrinkles.png)
+                pos, prof, _, closed = surface_profile(problem, problem.state.x.array)
+                profiles.append((problem.growth(), stepper.t, pos, prof))
             if stepper.at_equilibrium(rec):
                 status = "equilibrium"
                 message = (f"equilibrium at t = {rec.time:.6g} s: relative fluid uptake rate {stepper.uptake_rate:.3g} "
@@ -152,6 +157,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     tracker.destroy()
     if status != "interrupted":  # under mpirun the ranks have 1 s after a SIGTERM (docs/reliability.md)
         writer.plot_history(summary.get("critical"))
+        writer.plot_branch(profiles, summary.get("critical"), closed)
     last = summary["final"]
     log.info(f"hydrobuckle: {summary['status']} after {stepper.step} steps, t = {last['time']:.5g} s, "
              f"growth = {1e3 * last['growth_mm']:.4f} um, wall {summary['wall_time_s']:.1f} s -> {outdir}")
