@@ -66,8 +66,8 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
                             "the buckled branch (docs/postbuckling.md). Unset: from stop_at_onset", optional=True),
         "imperfection": _key(float, 0.01, _in_closed(-1.0, 1.0),
                              "after_onset = branch: the mode's peak surface normal displacement added at the onset, "
-                             "as a fraction of geometry.film_thickness (or mesh.element_size); sign = direction, "
-                             "not 0"),
+                             "as a fraction of geometry.film_thickness (or mesh.element_size, or a .msh mesh's "
+                             "sqrt(area/cells)); sign = direction, not 0"),
         "modes": _key(int, 3, _in_closed(1, 50), "eigenpairs reported at the onset"),
         "eigen_every": _key(int, 0, _ge(0), "also compute lambda_min every n steps (0 = only at the onset)"),
         "criterion": _key(str, "drained", _one_of("drained", "undrained", "rate"),

@@ -230,9 +230,11 @@ def test_stored_state_is_the_field_on_any_layout(shared_tmp, comm):
 # --- resumed runs against uninterrupted ones ----------------------------------------------------------
 
 AFTER_CROSSINGS = ("stability.stop_at_onset=false", "stability.max_crossings=8")
+ON_BRANCH = ("stability.after_onset=branch", "time.end=1.3")
 
 
-@pytest.mark.parametrize("extra, stop", [((), 8), (AFTER_CROSSINGS, 40)], ids=["before-onset", "after-crossings"])
+@pytest.mark.parametrize("extra, stop", [((), 8), (AFTER_CROSSINGS, 40), (ON_BRANCH, 40)],
+                         ids=["before-onset", "after-crossings", "on-a-branch"])
 def test_resume_continues_like_an_uninterrupted_run(extra, stop, shared_tmp, comm):
     """Stopped after ``stop`` steps (as an interrupt stops it: a checkpoint of that step), resumed: the same
     history.csv, onset, crossings and counters as the run never stopped. after-crossings: stopped past
@@ -245,12 +247,14 @@ def test_resume_continues_like_an_uninterrupted_run(extra, stop, shared_tmp, com
     assert stopped["status"] == "interrupted" and stopped["steps"] == stop
     resume = checkpoint.check(part, cfg, comm)
     assert resume.meta["step"] == stop and len(resume.rows) == stop + 1
-    if extra:
+    if extra is AFTER_CROSSINGS:
         assert resume.crossings == 3 and (part / "mode_surface.csv").is_file()
+    if extra is ON_BRANCH:  # stopped on the branch: the minimizing solver and the switch are resumed
+        assert resume.meta["stepper"]["minimizing"] and resume.meta["tracker"]["branch"]["switches"]
     resumed = simulate(cfg, part, comm, progress=False, resume=resume)
     _same_rows(_rows(shared_tmp / "full" / "history.csv"), _rows(part / "history.csv"), 1e-10)
     _same_summary(full, resumed, 1e-10)
-    if extra:  # the first crossing's mode files, written before the checkpoint, are kept
+    if extra is AFTER_CROSSINGS:  # the first crossing's mode files, written before the checkpoint, are kept
         _same_mode_surface(shared_tmp / "full" / "mode_surface.csv", part / "mode_surface.csv")
     assert not (part / checkpoint.FILE).exists()  # the run ended normally: nothing left to resume
 

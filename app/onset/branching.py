@@ -47,10 +47,21 @@ class Switch:
                 "imperfection_mm": self.imperfection_mm, "with_flux": self.with_flux, "inflow": self.inflow}
 
 
-def reference_length(cfg: dict) -> float:
+def reference_length(cfg: dict) -> float | None:
     """The length stability.imperfection is a fraction of: the film thickness, or (kinds without one) the
-    element size."""
-    return float(cfg["geometry"].get("film_thickness") or cfg["mesh"]["element_size"])
+    element size; None if the config has neither (a user's .msh: then the mesh's typical cell size,
+    :func:`typical_cell_size`)."""
+    value = cfg["geometry"].get("film_thickness") or cfg["mesh"].get("element_size")
+    return float(value) if value else None
+
+
+def typical_cell_size(problem) -> float:
+    """sqrt(area / cells) of the mesh."""
+    import ufl
+
+    one = compat.Constant(problem.domain, compat.ScalarType(1.0))
+    area = compat.assemble_scalar(compat.form(one * ufl.dx(domain=problem.domain)), problem.comm)
+    return float(np.sqrt(area / problem.cells()))
 
 
 def oriented(problem, mode: np.ndarray) -> np.ndarray:

@@ -86,10 +86,10 @@ class OnsetTracker:
         self.branch = None  # app.onset.branching.BranchSwitcher with after_onset = "branch"
         self.restabilized: list[dict] = []  # on a branch: where the negative count fell
         if settings.policy.branches:
-            from app.onset.branching import BranchSwitcher
+            from app.onset.branching import BranchSwitcher, typical_cell_size
 
             self.branch = BranchSwitcher(problem, stepper, settings.criterion, settings.imperfection,
-                                         reference_length or 1.0, log=self.log)
+                                         reference_length or typical_cell_size(problem), log=self.log)
 
     def start(self, rec) -> None:
         """The initial state's exact count, recorded with it."""
