@@ -44,7 +44,11 @@ def test_screen_never_misses_a_crossing_of_the_criterion(shared_tmp, comm, case,
     exact, screened = runs["exact"], runs["newton"]
     assert exact["status"] == screened["status"]
     if exact["status"] == "buckled":
-        assert screened["critical"]["bracket"] == pytest.approx(exact["critical"]["bracket"], rel=1e-12)
+        # serially the two runs take the same steps bit for bit; on 2 ranks MUMPS' parallel factorization
+        # leaves run-to-run roundoff (the slow thick layer under "rate 10": brackets 4e-11 to 2.7e-10 apart
+        # between two runs, with the code before and after the post-buckling work alike)
+        tight = 1e-12 if comm.size == 1 else 1e-8
+        assert screened["critical"]["bracket"] == pytest.approx(exact["critical"]["bracket"], rel=tight)
         assert screened["critical"]["growth_mm"] == pytest.approx(exact["critical"]["growth_mm"], rel=1e-9)
     else:
         assert exact["status"] == "failed" and criterion in ("undrained", "rate 1e-5") and case == "thick"
