@@ -9,7 +9,7 @@ layout (UFL integrals of the difference and of its flux through every facet), an
 fluxes against fluxes worked out by hand from the stored node coordinates. Subprocesses: SIGKILL of a
 running ``hydrobuckle run`` (serially, and of every process of an ``mpirun -n 2`` job: compared with an
 uninterrupted 2-rank launch to 1e-8, as two 2-rank launches partition the mesh differently), SIGTERM,
-and SIGINT of a ``sweep`` and of ``converge``, then ``--resume``.
+and SIGINT of a ``sweep``, then ``--resume``. (``converge`` and ``bench``: tests/test_resume_commands.py.)
 """
 
 from __future__ import annotations
@@ -506,23 +506,6 @@ def test_interrupted_sweep_stops_after_the_current_case_and_resumes_it(long_case
     same_rows(ref_rows, read_csv(out / "modulus_ratio=1" / "history.csv"), 1e-10)
     same_summary(ref, read_json(out / "modulus_ratio=1" / "summary.json"), 1e-10)
     assert os.path.isfile(out / "modulus_ratio=1.2" / "summary.json")
-
-
-def _interrupt_converge(toml, out):
-    proc = start([EXE, "converge", str(toml), "-o", str(out), "-q"])
-    wait_rows(proc, out / "base" / "history.csv", 20)
-    proc.send_signal(signal.SIGINT)
-    code, stdout, _ = finish(proc)
-    return code, stdout, sorted(p.name for p in out.iterdir())
-
-
-def test_interrupted_converge_starts_no_further_level(long_case, shared_tmp):
-    """SIGINT during converge's base run: exit 130 and no further level is set up (before, each one built
-    its mesh and wrote an "interrupted" directory); the report of what ran is still written."""
-    toml, _, _ = long_case
-    code, stdout, listing = on_rank0(_interrupt_converge, toml, shared_tmp / "converge")
-    assert code == 130, stdout[-2000:]
-    assert listing == ["base", "convergence.csv", "convergence.json", "convergence.md", "convergence.png"], listing
 
 
 MSH_CASE = """
