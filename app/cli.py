@@ -2,7 +2,8 @@
 
 Exit codes: 0 success, 1 solver failure (summary.json says "failed", history kept),
 2 bad input (one line naming the key and the allowed range; no result directory is created; a checkpoint
-that ``run --resume`` cannot continue: its directory is left as it was),
+that ``run --resume`` cannot continue: its directory is left as it was), or a result file that cannot
+be written (one line naming it; what was written, and the last checkpoint, are kept),
 130 / 143 interrupted by SIGINT / SIGTERM (summary.json says "interrupted", history kept).
 """
 
@@ -71,8 +72,31 @@ def _parser() -> argparse.ArgumentParser:
     conv.add_argument("--only", choices=["time", "mesh"], help="run only one of the two studies")
     conv.add_argument("--coarsen", action="store_true",
                       help="levels coarser than the config (cheap error estimate of the config itself)")
+    conv.add_argument("--force", action="store_true", help="run every level anew (a rerun otherwise keeps the "
+                      "levels an earlier converge finished and resumes an interrupted one from its checkpoint)")
     conv.add_argument("-q", "--quiet", action="store_true")
+    for command in (st, sw, conv, be):  # refused with a line that says how these commands continue
+        command.add_argument("--resume", nargs="?", const="", default=None, help=argparse.SUPPRESS)
     return p
+
+
+RERUN = {
+    "study": "study continues by itself: rerun the same command (finished cases are kept, an interrupted case "
+             "resumes from its checkpoint; --force runs every case anew)",
+    "sweep": "sweep continues by itself: rerun the same command (finished cases are kept, an interrupted case "
+             "resumes from its checkpoint; --force runs every case anew)",
+    "converge": "converge continues by itself: rerun the same command (finished levels are kept, an interrupted "
+                "level resumes from its checkpoint; --force runs every level anew)",
+    "bench": "bench cannot be resumed: it times whole runs, and an interrupted bench writes no bench.json; "
+             "rerun the same command",
+}
+
+
+def _no_resume(args) -> None:
+    """``--resume`` belongs to ``run``: on the commands that run several directories, a ConfigError
+    saying how they continue instead."""
+    if getattr(args, "resume", None) is not None:
+        raise config.ConfigError("", f"--resume: {RERUN[args.command]}")
 
 
 def _comm():
@@ -213,17 +237,19 @@ def cmd_run(args) -> int:
     from app.workflows.pipeline import run_case
 
     from app.io.checkpoint import CheckpointError
+    from app.io.writes import ResultWriteError
 
     try:
         summary = run_case(cfg, outdir, comm, resume=resume)
-    except CheckpointError as err:  # a checkpoint that does not fit the rebuilt mesh (DIR untouched)
-        return _input_error(comm, err)
+    except (CheckpointError, ResultWriteError) as err:  # a checkpoint that does not fit the rebuilt mesh
+        return _input_error(comm, err)                  # (DIR untouched); a result file not written
     return EXIT_OK if summary["status"] != "failed" else EXIT_SOLVER
 
 
 def cmd_converge(args) -> int:
     comm = _comm()
     try:
+        _no_resume(args)
         cfg = config.load(args.config, args.set)
         if not 2 <= args.levels <= 6:
             raise config.ConfigError("--levels", f"= {args.levels} is out of range; allowed: 2..6")
@@ -241,11 +267,16 @@ def cmd_converge(args) -> int:
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
-    from app.workflows.convergence import converge
     from app import interrupt
+    from app.io.writes import ResultWriteError
+    from app.workflows.convergence import converge
 
-    with interrupt.Watch(comm):  # a signal between two levels is recorded too: no further level starts
-        report = converge(cfg, outdir, comm, levels=args.levels, studies=studies, coarsen=args.coarsen)
+    try:
+        with interrupt.Watch(comm):  # a signal between two levels is recorded too: no further level starts
+            report = converge(cfg, outdir, comm, levels=args.levels, studies=studies, coarsen=args.coarsen,
+                              force=args.force)
+    except ResultWriteError as err:
+        return _input_error(comm, err)
     return EXIT_OK if report["base"] else EXIT_SOLVER
 
 
@@ -279,6 +310,10 @@ def _parse_values(text: str) -> list:
 def cmd_study(args) -> int:
     from app.workflows import studies
 
+    try:
+        _no_resume(args)
+    except config.ConfigError as err:
+        return _input_error(_comm(), err)
     if args.list or not args.name:
         for name, spec in studies.STUDIES.items():
             values = ", ".join(f"{v:g}" for v in spec.values)
@@ -300,7 +335,16 @@ def cmd_study(args) -> int:
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
-    rows = studies.run_study(cases, outdir, comm, spec.description, spec.param, args.ranks_per_case, args.force)
+    return _run_study(studies, comm, outdir, cases, spec.description, spec.param, args)
+
+
+def _run_study(studies, comm, outdir, cases, title, param, args) -> int:
+    from app.io.writes import ResultWriteError
+
+    try:
+        rows = studies.run_study(cases, outdir, comm, title, param, args.ranks_per_case, args.force)
+    except ResultWriteError as err:
+        return _input_error(comm, err)
     return _study_exit(rows, outdir, comm)
 
 
@@ -310,6 +354,7 @@ def cmd_sweep(args) -> int:
     comm = _comm()
     outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-sweep")
     try:
+        _no_resume(args)
         values = _parse_values(args.values)
         if not Path(args.config).is_file():
             raise config.ConfigError("", f"config file '{args.config}' does not exist")
@@ -329,8 +374,7 @@ def cmd_sweep(args) -> int:
         return _input_error(comm, config.ConfigError("", f"config file '{args.config}': {err}"))
     _setup_logging(comm, args.quiet)
     title = f"{Path(args.config).stem}: sweep of {args.param}"
-    rows = studies.run_study(cases, outdir, comm, title, args.param, args.ranks_per_case, args.force)
-    return _study_exit(rows, outdir, comm)
+    return _run_study(studies, comm, outdir, cases, title, args.param, args)
 
 
 def _check_ranks(args, comm) -> None:
@@ -353,6 +397,7 @@ def cmd_bench(args) -> int:
 
     comm = _comm()
     try:
+        _no_resume(args)
         sizes = [x.strip() for x in args.sizes.split(",") if x.strip()]
         bad = [x for x in sizes if x not in bench.SIZES]
         if bad or not sizes:
@@ -379,24 +424,61 @@ def cmd_bench(args) -> int:
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
+    from app import interrupt, logging_setup
+    from app.io import writes
+
     outdir = Path(args.output)
-    if ranks:
-        doc = bench.report(bench.launch_ranks(ranks, sizes, args.set, outdir))
-    else:
-        result = bench.run_bench(sizes, args.set, outdir, comm)
-        if args.json_only:
-            if comm.rank == 0:
-                Path(args.json_only).write_text(json.dumps(result))
-            return EXIT_OK
-        doc = bench.report({comm.size: result})
+    try:
+        with interrupt.Watch(comm):  # a signal between two sizes is recorded too: no further size starts
+            doc = _bench(bench, args, sizes, ranks, outdir, comm)
+    except writes.ResultWriteError as err:
+        return _input_error(comm, err)
+    except bench.BenchFailed as err:
+        if comm.rank == 0:
+            print(f"hydrobuckle: error: {err}", file=sys.stderr)
+        return EXIT_SOLVER
+    if doc is None:  # interrupted (exit 130 / 143: main); timings of a part of a run are no benchmark
+        logging_setup.get().info(f"bench: interrupted: no bench.json written in {outdir}; rerun the command")
+        return EXIT_OK
+    if args.json_only:
+        return EXIT_OK
+    text = bench.table(doc)
+
+    def files():
+        writes.at(outdir, outdir.mkdir, parents=True, exist_ok=True)
+        for name, content in (("bench.json", json.dumps(doc, indent=2)), ("bench.md", text)):
+            writes.at(outdir / name, writes.write_text, outdir / name, content + "\n")
+
+    try:
+        writes.on_rank0(comm, outdir, files)  # every rank may read bench.json once the command returns
+    except writes.ResultWriteError as err:
+        return _input_error(comm, err)
     if comm.rank == 0:
-        outdir.mkdir(parents=True, exist_ok=True)
-        (outdir / "bench.json").write_text(json.dumps(doc, indent=2) + "\n")
-        text = bench.table(doc)
-        (outdir / "bench.md").write_text(text + "\n")
         print(text)
-    comm.barrier()  # every rank may read bench.json once the command returns
     return EXIT_OK
+
+
+def _bench(bench, args, sizes, ranks, outdir, comm) -> dict | None:
+    """bench.json's content (with --json-only: the result, written to that file), or None if
+    interrupted. A stale bench.json/bench.md goes first: a directory holds them only once a bench has
+    ended."""
+    from app.io import writes
+
+    def clear():
+        for name in ("bench.json", "bench.md"):
+            (outdir / name).unlink(missing_ok=True)
+
+    if not args.json_only:
+        writes.on_rank0(comm, outdir, clear)
+    if ranks:
+        by_ranks = bench.launch_ranks(ranks, sizes, args.set, outdir)
+        return None if by_ranks is None else bench.report(by_ranks)
+    result = bench.run_bench(sizes, args.set, outdir, comm)
+    if result is not None and args.json_only:  # a launch of `bench --ranks`: for the launching process
+        path = Path(args.json_only)
+        writes.on_rank0(comm, path, writes.write_text, path, json.dumps(result))
+        return result
+    return None if result is None else bench.report({comm.size: result})
 
 
 def cmd_mesh(args) -> int:
@@ -436,11 +518,17 @@ COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version, "c
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line's exit code (``argv`` None: the process's own arguments, and the process is
+    ended here if an HDF5 file could not be closed, see :func:`app.compat.end_process`)."""
     args = _parser().parse_args(argv)
     code = COMMANDS[args.command](args)
     from app import interrupt
 
-    return interrupt.exit_code() or code  # 130 / 143 after SIGINT / SIGTERM (status "interrupted")
+    code = interrupt.exit_code() or code  # 130 / 143 after SIGINT / SIGTERM (status "interrupted")
+    compat = sys.modules.get("app.compat")  # not imported: no HDF5 file was written
+    if argv is None and compat is not None and compat.has_abandoned():
+        compat.end_process(code)
+    return code
 
 
 if __name__ == "__main__":

@@ -59,6 +59,9 @@ MUTATIONS = [
     ("bench keeps a repeated --sizes entry", "app/cli.py",
      r"if twice:", "if False:",
      ["tests/test_bench.py::test_bench_rejects_bad_sizes"]),
+    ("a history row that did not fit is left in part (not cut back off)", "app/io/writes.py",
+     r"os\.ftruncate\(self\.fd, start\)", "pass",
+     ["tests/test_write_errors.py::test_a_row_that_does_not_fit_is_cut_back_off"]),
 ]
 
 

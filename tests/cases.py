@@ -30,3 +30,30 @@ SMALL_TUBE = {
 def tube_case(*overrides, kind="tube"):
     user = {**SMALL_TUBE, "geometry": {**SMALL_TUBE["geometry"], "kind": kind}}
     return config.resolve(user, list(overrides))
+
+
+# A tiny bilayer (modulus ratio 1) under a ramp with a kink at t = 2 s: about 580 steps, buckling near the
+# end (about 3 s serially); a checkpoint every 10 steps. The runs the signal and write-error tests stop.
+LONG = """
+[geometry]
+length = 0.1
+substrate_thickness = 0.05
+film_thickness = 0.01
+[mesh]
+element_size = 0.01
+film_layers = 2
+[time]
+end = 3.0
+dt_initial = 0.001
+dt_max = 0.005
+[material.film]
+modulus_ratio = 1.0
+[loading]
+ramp_time = 2.0
+[stability]
+error_estimate = false
+[output]
+fields = false
+plot = false
+checkpoint_every = 10
+"""

@@ -1,9 +1,19 @@
-"""MPI-aware pytest fixtures: one shared tmp dir per test across ranks, collective clean-up."""
+"""MPI-aware pytest fixtures: one shared tmp dir per test across ranks, collective clean-up; and the
+helpers of the tests that start `hydrobuckle` as a child process (serially or under mpirun) and read
+what it wrote."""
 
 from __future__ import annotations
 
+import csv
 import gc
+import json
 import logging
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -74,6 +84,17 @@ def run_to_end(cfg: dict, comm):
 REPO = Path(__file__).resolve().parents[1]
 
 
+def _venv_bin() -> Path:
+    """The bin directory of the venv running the tests (scripts/test.sh: the checkout's .venv)."""
+    here = Path(sys.executable).parent
+    return here if (here / "hydrobuckle").is_file() else REPO / ".venv" / "bin"
+
+
+EXE = str(_venv_bin() / "hydrobuckle")  # the console script
+PYTHON = str(_venv_bin() / "python")
+MPIRUN = ["mpirun", "-q", "-n", "2", "--oversubscribe"]  # -q: no Open MPI banner after a non-zero exit
+
+
 def child_env() -> dict:
     """The environment for a child process that starts its own MPI job (mpirun or a singleton):
     the parent's Open MPI/PMIx variables removed, so a test running under ``mpirun -n 2`` can
@@ -110,3 +131,210 @@ def on_rank0(fn, *args, **kwargs):
     if not ok:
         raise value
     return value
+
+
+# --- a run against an uninterrupted one (history rows and summaries) -----------------------------------------
+
+
+def _rel(a, b) -> float:
+    a, b = float(a), float(b)
+    if a == b or (math.isnan(a) and math.isnan(b)):
+        return 0.0
+    return abs(a - b) / max(abs(a), abs(b))
+
+
+def same_rows(ref: list[dict], got: list[dict], rel: float) -> None:
+    """Two history tables: the same columns and rows, every value within ``rel`` (relative)."""
+    assert len(got) == len(ref), (len(got), len(ref))
+    assert list(got[0]) == list(ref[0])
+    # the surface amplitude of an unbuckled state is roundoff (~1e-18 mm): relative to the column's largest
+    # value (at least 1 um), not to itself
+    floor = {k: max(abs(float(r[k])) for r in ref) for k in ("amplitude_mm",) if k in ref[0]}
+    for a, b in zip(ref, got):
+        for k in a:
+            if a[k] != b[k]:
+                assert a[k] != "" and b[k] != "", (k, a, b)
+                if k in floor:
+                    assert abs(float(a[k]) - float(b[k])) <= rel * max(floor[k], 1e-3), (k, a["step"], a[k], b[k])
+                else:
+                    assert _rel(a[k], b[k]) <= rel, (k, a["step"], a[k], b[k])
+
+
+CRITICAL = ("time", "growth_mm", "wrinkle_count", "first_mode_wrinkle_count", "lambda_min_before",
+            "lambda_min_after", "negative_eigenvalues", "bisection_solves")
+
+
+def same_summary(ref: dict, got: dict, rel: float, counters: bool = True) -> None:
+    """Two summaries: the same status and counters (the linear solver's iteration count only with
+    ``counters``); every crossing's time, growth, counts, brackets and eigenvalues within ``rel`` (eigenvalues
+    near zero relative to the largest reported one)."""
+    assert got["status"] == ref["status"], got["message"]
+    for key in ("steps", "rejected_steps", "failed_solves", "stability_tests") + (("linear_solver",) if counters else ()):
+        assert got.get(key) == ref.get(key), key
+    crossings = [(ref.get("critical"), got.get("critical"))] + list(zip(ref.get("crossings", []),
+                                                                       got.get("crossings", [])))
+    assert len(ref.get("crossings", [])) == len(got.get("crossings", []))
+    for a, b in crossings:
+        assert (a is None) == (b is None)
+        if a is None:
+            continue
+        # eigenvalues near zero (at the bracket ends) relative to the largest reported one, as test_pinned
+        scale = max(abs(m["eigenvalue"]) for m in a["modes"])
+
+        def close(x, y, eigenvalue=False):
+            return abs(x - y) <= rel * max(abs(x), abs(y), scale if eigenvalue else 0.0)
+
+        for key in CRITICAL:
+            assert close(a[key], b[key], key.startswith("lambda")), (key, a[key], b[key])
+        assert all(close(x, y) for x, y in zip(a["bracket"], b["bracket"]))
+        assert [m["wrinkle_count"] for m in a["modes"]] == [m["wrinkle_count"] for m in b["modes"]]
+        assert all(close(x["eigenvalue"], y["eigenvalue"], True) for x, y in zip(a["modes"], b["modes"]))
+
+
+# --- child processes and what they write -------------------------------------------------------------
+
+
+def write_on_rank0(path: Path, text: str) -> Path:
+    """Write a text file on rank 0; every rank may read it once this returns."""
+    if MPI.COMM_WORLD.rank == 0:
+        Path(path).write_text(text)
+    MPI.COMM_WORLD.barrier()
+    return Path(path)
+
+
+def read_json(path) -> dict:
+    return json.loads(Path(path).read_text())
+
+
+def read_csv(path) -> list[dict]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def valid_history(path) -> list[dict]:
+    """history.csv's rows, asserting it is valid CSV as a crash or a full disk must leave it: no torn
+    row (every row has every column, step and time filled), steps 0, 1, ..., N, times increasing."""
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        table = list(reader)
+    assert table, f"{path}: no rows"
+    assert all(len(r) == len(reader.fieldnames) and None not in r.values() and "" not in (r["step"], r["time"])
+               for r in table), f"{path}: a torn row"
+    assert [int(r["step"]) for r in table] == list(range(len(table)))
+    times = [float(r["time"]) for r in table]
+    assert times == sorted(times) and times[0] == 0.0
+    return table
+
+
+def run_child(cmd, timeout=300, **kwargs) -> subprocess.CompletedProcess:
+    """Run a command to its end in the child environment (:func:`child_env`), output captured."""
+    return subprocess.run(cmd, env=child_env(), capture_output=True, text=True, timeout=timeout, **kwargs)
+
+
+def start(cmd) -> subprocess.Popen:
+    """Start a command in its own session (so :func:`kill_session` can reach every process it starts)."""
+    return subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+
+
+def wait_rows(proc, hist: Path, rows: int, also: Path | None = None, timeout=300) -> None:
+    """Wait until history.csv has more than ``rows`` data rows (and ``also`` exists); the process must
+    still be running."""
+    t0 = time.monotonic()
+    while not (hist.is_file() and len(hist.read_text().splitlines()) > rows and (also is None or also.is_file())):
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() - t0 < timeout, "no history rows"
+        time.sleep(0.02)
+
+
+def finish(proc, timeout=300):
+    """(exit code, stdout, stderr) of a started process; after ``timeout`` seconds its whole session is
+    killed (SIGKILL: the code is then -9)."""
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        kill_session(proc, signal.SIGKILL)
+        out, err = proc.communicate()
+    return proc.returncode, out, err
+
+
+def session_processes(proc) -> list[int]:
+    """The processes in the session of ``proc`` (started by :func:`start`): mpirun and its ranks, which
+    Open MPI puts into process groups of their own."""
+    pids = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[3]) == proc.pid and fields[0] != "Z":  # field 6 of stat: the session id
+            pids.append(int(entry))
+    return pids
+
+
+def kill_session(proc, sig) -> list[int]:
+    """Send ``sig`` to every process of ``proc``'s session at once (a node failure, ``kill -9`` of a
+    job); returns their pids."""
+    pids = session_processes(proc)
+    for pid in pids:
+        try:
+            os.kill(pid, sig)
+        except ProcessLookupError:
+            pass
+    return pids
+
+
+# --- a small file system that fills up ------------------------------------------------------------------
+
+
+def mount_problem(path: Path, size: str, readonly: bool = False) -> str | None:
+    """Mount a tmpfs of ``size`` (e.g. "400k") at ``path``: None, or why it cannot be done here."""
+    if os.geteuid() != 0:
+        return "mounting a tmpfs needs root"
+    path.mkdir(parents=True, exist_ok=True)
+    options = f"size={size}" + (",ro" if readonly else "")
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)], capture_output=True, text=True)
+    return None if done.returncode == 0 else f"mount -t tmpfs failed: {done.stderr.strip()}"
+
+
+def unmount(path: Path) -> None:
+    subprocess.run(["umount", "-l", str(path)], capture_output=True)
+
+
+@pytest.fixture
+def tmpfs(shared_tmp):
+    """``mount(size, name, readonly)``: a tmpfs of ``size`` mounted (by rank 0) at ``shared_tmp / name``;
+    the test is skipped where that is not possible (not root, no mount permission); unmounted after the
+    test, whatever happened."""
+    mounted = []
+
+    def mount(size: str, name: str = "disk", readonly: bool = False) -> Path:
+        path = shared_tmp / name
+        problem = on_rank0(mount_problem, path, size, readonly)
+        if problem:
+            pytest.skip(problem)
+        mounted.append(path)
+        return path
+
+    yield mount
+    for path in mounted:
+        on_rank0(unmount, path)
+
+
+def fill(directory: Path, leave: int = 0) -> Path:
+    """Fill the file system of ``directory`` up to ``leave`` free bytes with a file of zeros."""
+    ballast = directory / "filler"
+    with open(ballast, "ab", buffering=0) as f:
+        block = b"\0" * 4096
+        while True:
+            try:
+                f.write(block)
+            except OSError:
+                break
+    if leave:
+        size = ballast.stat().st_size
+        os.truncate(ballast, max(0, size - leave))
+    return ballast

@@ -6,28 +6,45 @@ on 1 rank and resumed on 2, and the reverse) to 1e-8 (the partitions change roun
 runs on 1 and 2 ranks agree to about 5e-12 here). The stored state is checked against a known field:
 written on one layout and read on another, compared with the same field interpolated on the reading
 layout (UFL integrals of the difference and of its flux through every facet), and the stored facet
-fluxes against fluxes worked out by hand from the stored node coordinates. Subprocesses: SIGKILL and
-SIGTERM of a running ``hydrobuckle run`` and SIGINT of a ``sweep``, then ``--resume``.
+fluxes against fluxes worked out by hand from the stored node coordinates. Subprocesses: SIGKILL of a
+running ``hydrobuckle run`` (serially, and of every process of an ``mpirun -n 2`` job: compared with an
+uninterrupted 2-rank launch to 1e-8, as two 2-rank launches partition the mesh differently), SIGTERM,
+and SIGINT of a ``sweep``, then ``--resume``. (``converge`` and ``bench``: tests/test_resume_commands.py.)
 """
 
 from __future__ import annotations
 
 import copy
-import csv
 import json
 import math
 import os
 import shutil
 import signal
-import subprocess
 import time
 import zipfile
 
 import numpy as np
 import pytest
 import ufl
-from cases import swelling_case
-from conftest import REPO, child_env, on_rank0, time_stepper
+from cases import LONG, swelling_case
+from conftest import (
+    EXE,
+    MPIRUN,
+    finish,
+    kill_session,
+    on_rank0,
+    read_csv,
+    read_json,
+    run_child,
+    same_rows,
+    same_summary,
+    session_processes,
+    start,
+    time_stepper,
+    valid_history,
+    wait_rows,
+    write_on_rank0,
+)
 from mpi4py import MPI
 
 from app import compat, config
@@ -37,65 +54,8 @@ from app.model.problem import Problem
 from app.onset.tracker import Untracked
 from app.workflows.run import simulate
 
-EXE = str(REPO / ".venv" / "bin" / "hydrobuckle")
 EVERY = ("output.checkpoint_every=3", "stability.error_estimate=false")
 CROSS_RANK = 1e-8  # see the module docstring
-
-
-def _rows(path) -> list[dict]:
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
-
-
-def _rel(a, b) -> float:
-    a, b = float(a), float(b)
-    if a == b or (math.isnan(a) and math.isnan(b)):
-        return 0.0
-    return abs(a - b) / max(abs(a), abs(b))
-
-
-def _same_rows(ref: list[dict], got: list[dict], rel: float) -> None:
-    assert len(got) == len(ref), (len(got), len(ref))
-    assert list(got[0]) == list(ref[0])
-    # the surface amplitude of an unbuckled state is roundoff (~1e-18 mm): relative to the column's largest
-    # value (at least 1 um), not to itself
-    floor = {"amplitude_mm": max(abs(float(r["amplitude_mm"])) for r in ref)}
-    for a, b in zip(ref, got):
-        for k in a:
-            if a[k] != b[k]:
-                assert a[k] != "" and b[k] != "", (k, a, b)
-                if k in floor:
-                    assert abs(float(a[k]) - float(b[k])) <= rel * max(floor[k], 1e-3), (k, a["step"], a[k], b[k])
-                else:
-                    assert _rel(a[k], b[k]) <= rel, (k, a["step"], a[k], b[k])
-
-
-CRITICAL = ("time", "growth_mm", "wrinkle_count", "first_mode_wrinkle_count", "lambda_min_before",
-            "lambda_min_after", "negative_eigenvalues", "bisection_solves")
-
-
-def _same_summary(ref: dict, got: dict, rel: float, counters: bool = True) -> None:
-    assert got["status"] == ref["status"], got["message"]
-    for key in ("steps", "rejected_steps", "failed_solves", "stability_tests") + (("linear_solver",) if counters else ()):
-        assert got.get(key) == ref.get(key), key
-    crossings = [(ref.get("critical"), got.get("critical"))] + list(zip(ref.get("crossings", []),
-                                                                       got.get("crossings", [])))
-    assert len(ref.get("crossings", [])) == len(got.get("crossings", []))
-    for a, b in crossings:
-        assert (a is None) == (b is None)
-        if a is None:
-            continue
-        # eigenvalues near zero (at the bracket ends) relative to the largest reported one, as test_pinned
-        scale = max(abs(m["eigenvalue"]) for m in a["modes"])
-
-        def close(x, y, eigenvalue=False):
-            return abs(x - y) <= rel * max(abs(x), abs(y), scale if eigenvalue else 0.0)
-
-        for key in CRITICAL:
-            assert close(a[key], b[key], key.startswith("lambda")), (key, a[key], b[key])
-        assert all(close(x, y) for x, y in zip(a["bracket"], b["bracket"]))
-        assert [m["wrinkle_count"] for m in a["modes"]] == [m["wrinkle_count"] for m in b["modes"]]
-        assert all(close(x["eigenvalue"], y["eigenvalue"], True) for x, y in zip(a["modes"], b["modes"]))
 
 
 def _listing(d) -> dict:
@@ -258,7 +218,7 @@ def test_resume_continues_like_an_uninterrupted_run(extra, stop, shared_tmp, com
     if extra is ON_BRANCH:  # stopped on the branch: the minimizing solver and the switch are resumed
         assert resume.meta["stepper"]["minimizing"] and resume.meta["tracker"]["branch"]["switches"]
     resumed = simulate(cfg, part, comm, progress=False, resume=resume)
-    ref, got = _rows(shared_tmp / "full" / "history.csv"), _rows(part / "history.csv")
+    ref, got = read_csv(shared_tmp / "full" / "history.csv"), read_csv(part / "history.csv")
     tol = 1e-10
     if extra is ON_BRANCH and comm.size > 1:
         # on 2 ranks a resumed state equals the stopped one to ~1e-13, not bit for bit, and the minimizer's
@@ -269,8 +229,8 @@ def test_resume_continues_like_an_uninterrupted_run(extra, stop, shared_tmp, com
             r.pop("newton_its")
             r.pop("error_estimate")
         tol = 1e-5
-    _same_rows(ref, got, tol)
-    _same_summary(full, resumed, tol, counters=tol == 1e-10)  # iteration counters: see above
+    same_rows(ref, got, tol)
+    same_summary(full, resumed, tol, counters=tol == 1e-10)  # iteration counters: see above
     if extra is AFTER_CROSSINGS:  # the first crossing's mode files, written before the checkpoint, are kept
         _same_mode_surface(shared_tmp / "full" / "mode_surface.csv", part / "mode_surface.csv")
     assert not (part / checkpoint.FILE).exists()  # the run ended normally: nothing left to resume
@@ -302,22 +262,16 @@ def test_resume_on_another_rank_count(shared_tmp, comm):
                        resume=checkpoint.check(shared_tmp / "from1", cfg, comm))
     assert resumed["ranks"] == 2
     for ref, d in ((full_world, "full2"), (full_self, "full1")):
-        _same_summary(ref, resumed, CROSS_RANK)
-        _same_rows(_rows(shared_tmp / d / "history.csv"), _rows(shared_tmp / "from1" / "history.csv"), CROSS_RANK)
+        same_summary(ref, resumed, CROSS_RANK)
+        same_rows(read_csv(shared_tmp / d / "history.csv"), read_csv(shared_tmp / "from1" / "history.csv"), CROSS_RANK)
     # written on 2 ranks, resumed on 1
     simulate(cfg, shared_tmp / "from2", comm, progress=False, stop_after=8)
     resumed = on_rank0(lambda: simulate(cfg, shared_tmp / "from2", self_, progress=False,
                                         resume=checkpoint.check(shared_tmp / "from2", cfg, self_)))
     assert resumed["ranks"] == 1
     for ref, d in ((full_world, "full2"), (full_self, "full1")):
-        _same_summary(ref, resumed, CROSS_RANK)
-        _same_rows(_rows(shared_tmp / d / "history.csv"), _rows(shared_tmp / "from2" / "history.csv"), CROSS_RANK)
-
-
-def _write_toml(path, cfg) -> None:
-    if MPI.COMM_WORLD.rank == 0:
-        path.write_text(config.dumps(cfg))
-    MPI.COMM_WORLD.barrier()
+        same_summary(ref, resumed, CROSS_RANK)
+        same_rows(read_csv(shared_tmp / d / "history.csv"), read_csv(shared_tmp / "from2" / "history.csv"), CROSS_RANK)
 
 
 def test_cli_resume_after_a_failed_run_cuts_history_back(shared_tmp, comm, capsys):
@@ -326,16 +280,16 @@ def test_cli_resume_after_a_failed_run_cuts_history_back(shared_tmp, comm, capsy
     checkpoint's 7 rows and continued; the result is the uninterrupted run's."""
     cfg = swelling_case(*EVERY)
     toml = shared_tmp / "case.toml"
-    _write_toml(toml, cfg)
+    write_on_rank0(toml, config.dumps(cfg))
     out = shared_tmp / "out"
     assert main(["run", str(toml), "-o", str(out), "-q", "--set", "time.max_steps=8"]) == 1
-    assert len(_rows(out / "history.csv")) == 9
+    assert len(read_csv(out / "history.csv")) == 9
     resume = checkpoint.check(out, cfg, comm)
     assert resume.meta["step"] == 6 and len(resume.rows) == 7
     assert main(["run", str(toml), "--resume", str(out), "-q"]) == 0
     full = simulate(cfg, shared_tmp / "full", comm, progress=False)
-    _same_rows(_rows(shared_tmp / "full" / "history.csv"), _rows(out / "history.csv"), 1e-10)
-    _same_summary(full, json.loads((out / "summary.json").read_text()), 1e-10)
+    same_rows(read_csv(shared_tmp / "full" / "history.csv"), read_csv(out / "history.csv"), 1e-10)
+    same_summary(full, read_json(out / "summary.json"), 1e-10)
     assert config.load(out / "config.toml") == cfg  # the resumed run's config (max_steps back to its default)
     capsys.readouterr()
 
@@ -349,8 +303,8 @@ def test_time_end_may_change_on_resume(shared_tmp, comm):
     resumed = simulate(long_, shared_tmp / "part", comm, progress=False,
                        resume=checkpoint.check(shared_tmp / "part", long_, comm))
     full = simulate(long_, shared_tmp / "full", comm, progress=False)
-    _same_rows(_rows(shared_tmp / "full" / "history.csv"), _rows(shared_tmp / "part" / "history.csv"), 1e-10)
-    _same_summary(full, resumed, 1e-10)
+    same_rows(read_csv(shared_tmp / "full" / "history.csv"), read_csv(shared_tmp / "part" / "history.csv"), 1e-10)
+    same_summary(full, resumed, 1e-10)
 
 
 def _rewrite_npz(src, dst, change) -> None:
@@ -368,7 +322,7 @@ def test_resume_refusals_leave_the_directory_as_it_was(shared_tmp, comm, capsys)
     (detected after meshing, before the directory is touched). Keys that change no result pass."""
     cfg = swelling_case(*EVERY)
     toml = shared_tmp / "case.toml"
-    _write_toml(toml, cfg)
+    write_on_rank0(toml, config.dumps(cfg))
     out = shared_tmp / "out"
     simulate(cfg, out, comm, progress=False, stop_after=4)
     before = on_rank0(_listing, out)
@@ -430,32 +384,6 @@ def test_resume_refusals_leave_the_directory_as_it_was(shared_tmp, comm, capsys)
 
 # --- signals: SIGKILL, SIGTERM, an interrupted sweep -----------------------------------------------
 
-# a tiny homogeneous layer (no onset) under a ramp with a kink at t = 2 s: about 600 steps in 2 s
-LONG = """
-[geometry]
-length = 0.1
-substrate_thickness = 0.05
-film_thickness = 0.01
-[mesh]
-element_size = 0.01
-film_layers = 2
-[time]
-end = 3.0
-dt_initial = 0.001
-dt_max = 0.005
-[material.film]
-modulus_ratio = 1.0
-[loading]
-ramp_time = 2.0
-[stability]
-error_estimate = false
-[output]
-fields = false
-plot = false
-checkpoint_every = 10
-"""
-
-
 @pytest.fixture(scope="module")
 def long_case(tmp_path_factory):
     """(config file, the uninterrupted run's history rows and summary), run once on rank 0."""
@@ -468,54 +396,20 @@ def long_case(tmp_path_factory):
         toml = Path(d) / "long.toml"
         toml.write_text(LONG)
         s = simulate(config.load(toml), Path(d) / "reference", MPI.COMM_SELF, progress=False)
-        return toml, _rows(Path(d) / "reference" / "history.csv"), s
+        return toml, read_csv(Path(d) / "reference" / "history.csv"), s
 
     return on_rank0(reference)
 
 
-def _start(argv):
-    return subprocess.Popen([EXE, *argv], env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
-
-
-def _wait_rows(proc, hist, rows, also=None, timeout=300):
-    t0 = time.monotonic()
-    while not (hist.is_file() and len(hist.read_text().splitlines()) > rows and (also is None or also.is_file())):
-        assert proc.poll() is None, proc.communicate()
-        assert time.monotonic() - t0 < timeout, "no history rows"
-        time.sleep(0.02)
-
-
-def _finish(proc, timeout=300):
-    try:
-        out, err = proc.communicate(timeout=timeout)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    return proc.returncode, out, err
-
-
-def _valid_history(path) -> list[dict]:
-    with open(path, newline="") as f:
-        reader = csv.DictReader(f)
-        table = list(reader)
-    assert all(len(r) == len(reader.fieldnames) and None not in r.values() and "" not in
-               (r["step"], r["time"]) for r in table)  # no torn row
-    assert [int(r["step"]) for r in table] == list(range(len(table)))
-    return table
-
-
 def _kill_and_resume(toml, out):
-    proc = _start(["run", str(toml), "-o", str(out)])
-    _wait_rows(proc, out / "history.csv", 25, also=out / checkpoint.FILE)
+    proc = start([EXE, "run", str(toml), "-o", str(out)])
+    wait_rows(proc, out / "history.csv", 25, also=out / checkpoint.FILE)
     proc.send_signal(signal.SIGKILL)
-    code, _, _ = _finish(proc)
-    killed = _valid_history(out / "history.csv")
+    code, _, _ = finish(proc)
+    killed = valid_history(out / "history.csv")
     assert not (out / "summary.json").exists()  # a killed run writes no summary
     step = checkpoint.check(out, config.load(toml), MPI.COMM_SELF).meta["step"]
-    resumed = subprocess.run([EXE, "run", str(toml), "--resume", str(out)], env=child_env(), capture_output=True,
-                             text=True, timeout=300)
+    resumed = run_child([EXE, "run", str(toml), "--resume", str(out)])
     return code, len(killed), step, resumed
 
 
@@ -530,20 +424,60 @@ def test_sigkill_loses_at_most_the_steps_since_the_last_checkpoint(long_case, sh
     assert step % 10 == 0 and 0 <= (rows - 1) - step <= 10, (rows, step)
     assert resumed.returncode == 0, resumed.stdout[-2000:] + resumed.stderr[-2000:]
     assert f"resumed from {out / checkpoint.FILE} at step {step}," in resumed.stdout
-    _same_rows(ref_rows, _rows(out / "history.csv"), 1e-10)
-    _same_summary(ref, json.loads((out / "summary.json").read_text()), 1e-10)
+    same_rows(ref_rows, read_csv(out / "history.csv"), 1e-10)
+    same_summary(ref, read_json(out / "summary.json"), 1e-10)
+    assert not (out / checkpoint.FILE).exists()
+
+
+def _kill_mpirun_and_resume(toml, out, reference):
+    ref = run_child([*MPIRUN, EXE, "run", str(toml), "-o", str(reference), "-q"])
+    assert ref.returncode == 0, ref.stderr[-2000:]
+    proc = start([*MPIRUN, EXE, "run", str(toml), "-o", str(out)])
+    wait_rows(proc, out / "history.csv", 25, also=out / checkpoint.FILE)
+    killed = kill_session(proc, signal.SIGKILL)  # mpirun and both ranks (each in a process group of its own)
+    code, _, _ = finish(proc)
+    t0 = time.monotonic()
+    while session_processes(proc) and time.monotonic() - t0 < 10:
+        time.sleep(0.05)
+    left = session_processes(proc)
+    rows = len(valid_history(out / "history.csv"))
+    summary = (out / "summary.json").exists()
+    meta = checkpoint.check(out, config.load(toml), MPI.COMM_SELF).meta
+    resumed = run_child([*MPIRUN, EXE, "run", str(toml), "--resume", str(out)])
+    return code, len(killed), left, rows, summary, meta, resumed
+
+
+def test_sigkill_of_an_mpirun_job_loses_at_most_the_steps_since_the_last_checkpoint(long_case, shared_tmp):
+    """SIGKILL to every process of a running `mpirun -n 2 hydrobuckle run` (mpirun and its two ranks, as
+    a node failure or `kill -9` of the job) once a checkpoint exists: history.csv is valid CSV, the
+    checkpoint (written on 2 ranks) is at most output.checkpoint_every steps behind it, and `mpirun -n
+    2 ... run --resume` completes with the history and onset of an uninterrupted 2-rank run, to the
+    cross-layout tolerance (every 2-rank launch partitions the mesh anew)."""
+    toml, _, _ = long_case
+    out = shared_tmp / "killed2"
+    code, n_killed, left, rows, summary, meta, resumed = on_rank0(_kill_mpirun_and_resume, toml, out,
+                                                                 shared_tmp / "reference2")
+    assert code == -signal.SIGKILL and n_killed >= 3 and left == [], (code, n_killed, left)
+    assert not summary  # a killed run writes no summary
+    step = meta["step"]
+    assert meta["ranks"] == 2 and step % 10 == 0 and 0 <= (rows - 1) - step <= 10, (rows, step)
+    assert resumed.returncode == 0, resumed.stdout[-2000:] + resumed.stderr[-2000:]
+    assert f"resumed from {out / checkpoint.FILE} at step {step}," in resumed.stdout
+    ref = read_json(shared_tmp / "reference2" / "summary.json")
+    same_rows(read_csv(shared_tmp / "reference2" / "history.csv"), read_csv(out / "history.csv"), CROSS_RANK)
+    same_summary(ref, read_json(out / "summary.json"), CROSS_RANK)
+    assert read_json(out / "summary.json")["resumed_from"] == {"step": step, "time": meta["t"], "ranks": 2}
     assert not (out / checkpoint.FILE).exists()
 
 
 def _term_and_resume(toml, out):
-    proc = _start(["run", str(toml), "-o", str(out)])
-    _wait_rows(proc, out / "history.csv", 15)
+    proc = start([EXE, "run", str(toml), "-o", str(out)])
+    wait_rows(proc, out / "history.csv", 15)
     proc.send_signal(signal.SIGTERM)
-    code, _, _ = _finish(proc)
-    summary = json.loads((out / "summary.json").read_text())
+    code, _, _ = finish(proc)
+    summary = read_json(out / "summary.json")
     meta = checkpoint.check(out, config.load(toml), MPI.COMM_SELF).meta
-    resumed = subprocess.run([EXE, "run", str(toml), "--resume", str(out)], env=child_env(), capture_output=True,
-                             text=True, timeout=300)
+    resumed = run_child([EXE, "run", str(toml), "--resume", str(out)])
     return code, summary, meta["step"], len(meta["rows"]), resumed
 
 
@@ -556,18 +490,18 @@ def test_sigterm_writes_a_checkpoint_to_resume_from(long_case, shared_tmp):
     assert code == 143 and summary["status"] == "interrupted"
     assert step == summary["steps"] and rows == step + 1
     assert resumed.returncode == 0, resumed.stdout[-2000:] + resumed.stderr[-2000:]
-    _same_rows(ref_rows, _rows(out / "history.csv"), 1e-10)
-    _same_summary(ref, json.loads((out / "summary.json").read_text()), 1e-10)
+    same_rows(ref_rows, read_csv(out / "history.csv"), 1e-10)
+    same_summary(ref, read_json(out / "summary.json"), 1e-10)
 
 
 def _interrupt_sweep(toml, out):
     argv = ["sweep", str(toml), "--param", "material.film.modulus_ratio", "--values", "1.0,1.2", "-o", str(out)]
-    proc = _start(argv)
-    _wait_rows(proc, out / "modulus_ratio=1" / "history.csv", 20)
+    proc = start([EXE, *argv])
+    wait_rows(proc, out / "modulus_ratio=1" / "history.csv", 20)
     proc.send_signal(signal.SIGINT)
-    code, first_out, _ = _finish(proc)
+    code, first_out, _ = finish(proc)
     listing = sorted(p.name for p in out.iterdir())
-    again = subprocess.run([EXE, *argv], env=child_env(), capture_output=True, text=True, timeout=300)
+    again = run_child([EXE, *argv])
     return code, first_out, listing, again
 
 
@@ -584,26 +518,9 @@ def test_interrupted_sweep_stops_after_the_current_case_and_resumes_it(long_case
     assert again.returncode == 0, again.stdout[-2000:] + again.stderr[-2000:]
     assert "study: modulus_ratio=1: resuming at step" in again.stdout
     assert "study: modulus_ratio=1.2: running" in again.stdout
-    _same_rows(ref_rows, _rows(out / "modulus_ratio=1" / "history.csv"), 1e-10)
-    _same_summary(ref, json.loads((out / "modulus_ratio=1" / "summary.json").read_text()), 1e-10)
+    same_rows(ref_rows, read_csv(out / "modulus_ratio=1" / "history.csv"), 1e-10)
+    same_summary(ref, read_json(out / "modulus_ratio=1" / "summary.json"), 1e-10)
     assert os.path.isfile(out / "modulus_ratio=1.2" / "summary.json")
-
-
-def _interrupt_converge(toml, out):
-    proc = _start(["converge", str(toml), "-o", str(out), "-q"])
-    _wait_rows(proc, out / "base" / "history.csv", 20)
-    proc.send_signal(signal.SIGINT)
-    code, stdout, _ = _finish(proc)
-    return code, stdout, sorted(p.name for p in out.iterdir())
-
-
-def test_interrupted_converge_starts_no_further_level(long_case, shared_tmp):
-    """SIGINT during converge's base run: exit 130 and no further level is set up (before, each one built
-    its mesh and wrote an "interrupted" directory); the report of what ran is still written."""
-    toml, _, _ = long_case
-    code, stdout, listing = on_rank0(_interrupt_converge, toml, shared_tmp / "converge")
-    assert code == 130, stdout[-2000:]
-    assert listing == ["base", "convergence.csv", "convergence.json", "convergence.md", "convergence.png"], listing
 
 
 MSH_CASE = """
@@ -652,8 +569,8 @@ def test_user_msh_resumes_and_an_edited_file_is_refused(shared_tmp, comm, capsys
     on_rank0(shutil.copytree, out, edited)
     assert main(["run", str(toml), "--resume", str(out), "-q"]) == 0
     full = simulate(cfg, shared_tmp / "full", comm, progress=False)
-    _same_rows(_rows(shared_tmp / "full" / "history.csv"), _rows(out / "history.csv"), 1e-10)
-    _same_summary(full, json.loads((out / "summary.json").read_text()), 1e-10)
+    same_rows(read_csv(shared_tmp / "full" / "history.csv"), read_csv(out / "history.csv"), 1e-10)
+    same_summary(full, read_json(out / "summary.json"), 1e-10)
     on_rank0(lambda: msh.write_bytes(msh.read_bytes() + b"\n"))
     listing = on_rank0(_listing, edited)
     assert main(["run", str(toml), "--resume", str(edited), "-q"]) == 2

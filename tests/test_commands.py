@@ -12,15 +12,13 @@ built-in bilayer as the reference of the same mesh read from a user .msh.
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, child_env, on_rank0, run_to_end
+from conftest import PYTHON, REPO, on_rank0, read_csv, read_json, run_child, run_to_end, write_on_rank0
 from mpi4py import MPI
 
 from app import cli, compat, config, geometry
@@ -56,22 +54,6 @@ SHRINK = ["geometry.length=0.15", "geometry.substrate_thickness=0.15", "mesh.ele
 
 def _sets(items):
     return [a for item in items for a in ("--set", item)]
-
-
-def _write(path: Path, text: str) -> Path:
-    if MPI.COMM_WORLD.rank == 0:
-        path.write_text(text)
-    MPI.COMM_WORLD.barrier()
-    return path
-
-
-def _json(path):
-    return json.loads(Path(path).read_text())
-
-
-def _csv(path):
-    with open(path) as f:
-        return list(csv.DictReader(f))
 
 
 def _mtime(path):
@@ -179,13 +161,13 @@ def test_level_meshes_have_the_element_sizes_of_their_configs(comm):
 
 
 def test_converge_time_two_levels_end_to_end(shared_tmp, comm):
-    cfg_path, out = _write(shared_tmp / "tiny.toml", TINY), shared_tmp / "conv"
+    cfg_path, out = write_on_rank0(shared_tmp / "tiny.toml", TINY), shared_tmp / "conv"
     assert cli.main(["converge", str(cfg_path), "--only", "time", "--levels", "2", "-o", str(out), "-q"]) == 0
-    doc = _json(out / "convergence.json")
+    doc = read_json(out / "convergence.json")
     assert doc["direction"] == "refine" and list(doc["studies"]) == ["time"]
     base_cfg = config.load(cfg_path)
     tol = base_cfg["time"]["tolerance"]
-    summaries = [_json(out / d / "summary.json") for d in ("base", "time1")]
+    summaries = [read_json(out / d / "summary.json") for d in ("base", "time1")]
     assert config.load(out / "base" / "config.toml")["time"]["tolerance"] == tol
     assert config.load(out / "time1" / "config.toml")["time"]["tolerance"] == pytest.approx(tol / 4, rel=1e-14)
     assert not (out / "mesh1").exists()
@@ -207,7 +189,7 @@ def test_converge_time_two_levels_end_to_end(shared_tmp, comm):
     assert b["g_c_um"] == g0
     assert b["converged_estimate_um"] == pytest.approx(g_inf, rel=1e-12)
     assert b["error_estimate_um"] == pytest.approx(abs(g0 - g_inf), rel=1e-9, abs=1e-15)
-    table = _csv(out / "convergence.csv")
+    table = read_csv(out / "convergence.csv")
     assert [float(r["g_c_um"]) for r in table] == [g0, g1]
     assert (out / "convergence.md").is_file() and (out / "convergence.png").stat().st_size > 0
 
@@ -215,26 +197,26 @@ def test_converge_time_two_levels_end_to_end(shared_tmp, comm):
 def test_converge_fixed_steps_halve_the_step_the_runs_take(shared_tmp, comm):
     """With time.adaptive = false the time study halves the fixed step: every step of each level's
     history (the onset, about 0.9 s, comes before the end of the ramp) has exactly that size."""
-    cfg_path, out = _write(shared_tmp / "tiny.toml", TINY), shared_tmp / "conv"
+    cfg_path, out = write_on_rank0(shared_tmp / "tiny.toml", TINY), shared_tmp / "conv"
     assert cli.main(["converge", str(cfg_path), "--only", "time", "--levels", "2", "-o", str(out), "-q",
                      *_sets(["time.adaptive=false", "time.dt_initial=0.04", "time.dt_max=0.04"])]) == 0
-    doc = _json(out / "convergence.json")
+    doc = read_json(out / "convergence.json")
     for level, d in enumerate(("base", "time1")):
-        dts = {round(float(r["dt"]), 15) for r in _csv(out / d / "history.csv")[1:]}
+        dts = {round(float(r["dt"]), 15) for r in read_csv(out / d / "history.csv")[1:]}
         assert dts == {0.04 / 2 ** level}
         assert doc["rows"][level]["parameter"] == 0.04 / 2 ** level
-        assert _json(out / d / "summary.json")["critical"]["time"] < 1.0
+        assert read_json(out / d / "summary.json")["critical"]["time"] < 1.0
 
 
 def test_converge_coarsened_mesh_end_to_end(shared_tmp, comm):
     """--coarsen: level 1 has twice the element size and half the film layers; the base (the finest)
     gets the extrapolated error."""
-    cfg_path, out = _write(shared_tmp / "tiny.toml", TINY), shared_tmp / "conv"
+    cfg_path, out = write_on_rank0(shared_tmp / "tiny.toml", TINY), shared_tmp / "conv"
     assert cli.main(["converge", str(cfg_path), "--only", "mesh", "--levels", "2", "--coarsen", "-o", str(out),
                      "-q"]) == 0
-    doc = _json(out / "convergence.json")
+    doc = read_json(out / "convergence.json")
     assert doc["direction"] == "coarsen"
-    fine, coarse = _json(out / "base" / "summary.json"), _json(out / "mesh1" / "summary.json")
+    fine, coarse = read_json(out / "base" / "summary.json"), read_json(out / "mesh1" / "summary.json")
     c1 = config.load(out / "mesh1" / "config.toml")
     assert c1["mesh"]["element_size"] == 0.02 and c1["mesh"]["film_layers"] == 1
     assert coarse["mesh"]["cells"] < fine["mesh"]["cells"]
@@ -248,7 +230,7 @@ def test_converge_coarsened_mesh_end_to_end(shared_tmp, comm):
 
 
 def test_converge_rejects_bad_input_without_running(shared_tmp):
-    cfg_path = _write(shared_tmp / "tiny.toml", TINY)
+    cfg_path = write_on_rank0(shared_tmp / "tiny.toml", TINY)
     out = shared_tmp / "never"
     assert cli.main(["converge", str(cfg_path), "--levels", "7", "-o", str(out), "-q"]) == 2
     assert cli.main(["converge", str(cfg_path), "--only", "mesh", "--coarsen", "--levels", "3", "-o", str(out)]) == 2
@@ -314,7 +296,7 @@ def _global_facets(tm, name, comm):
     (TINY_TUBE, ["film", "substrate"], ["inner", "outer"]),
 ], ids=["bilayer", "tube"])
 def test_mesh_command_writes_the_builtin_mesh(shared_tmp, comm, capsys, text, cells, facets):
-    cfg_path, msh = _write(shared_tmp / "g.toml", text), shared_tmp / "sub" / "g.msh"
+    cfg_path, msh = write_on_rank0(shared_tmp / "g.toml", text), shared_tmp / "sub" / "g.msh"
     assert cli.main(["mesh", str(cfg_path), "-o", str(msh)]) == 0
     if comm.rank == 0:
         assert f"wrote {msh}" in capsys.readouterr().out
@@ -340,8 +322,8 @@ def test_mesh_command_writes_the_builtin_mesh(shared_tmp, comm, capsys, text, ce
 
 
 def test_mesh_command_rejects_a_msh_config(shared_tmp):
-    cfg_path = _write(shared_tmp / "m.toml", '[geometry]\nkind = "msh"\nfile = "x.msh"\nlayers = { a = "film" }\n'
-                                            'boundaries = { b = "permeable" }\n')
+    cfg_path = write_on_rank0(shared_tmp / "m.toml", '[geometry]\nkind = "msh"\nfile = "x.msh"\n'
+                              'layers = { a = "film" }\nboundaries = { b = "permeable" }\n')
     assert cli.main(["mesh", str(cfg_path), "-o", str(shared_tmp / "x.msh")]) == 2
     assert not (shared_tmp / "x.msh").exists()
 
@@ -364,7 +346,7 @@ mobility = 2e-4
                                              (TINY_TUBE, []), (MSH_CONFIG, ["geometry.wrinkles=along"])],
                          ids=["bilayer", "tube", "msh"])
 def test_validate_prints_a_resolved_config_that_round_trips(shared_tmp, capsys, text, overrides):
-    cfg_path = _write(shared_tmp / "v.toml", text)
+    cfg_path = write_on_rank0(shared_tmp / "v.toml", text)
     capsys.readouterr()
     assert cli.main(["validate", str(cfg_path), *_sets(overrides)]) == 0
     printed = capsys.readouterr().out
@@ -381,7 +363,7 @@ def test_validate_round_trips_a_material_table_without_keys(shared_tmp, capsys):
     validate's printout, or the printed config (and every result's config.toml) no longer loads."""
     text = MSH_CONFIG.replace("modulus_ratio = 3.0\nmobility = 2e-4\n", "")
     assert text.rstrip().endswith("[material.layers.coat]")
-    cfg_path = _write(shared_tmp / "v.toml", text)
+    cfg_path = write_on_rank0(shared_tmp / "v.toml", text)
     capsys.readouterr()
     assert cli.main(["validate", str(cfg_path)]) == 0
     again = shared_tmp / f"printed{MPI.COMM_WORLD.rank}.toml"
@@ -409,14 +391,14 @@ def _study(out, *extra):
 def test_study_runs_skips_complete_cases_and_reruns_them_with_force(shared_tmp, comm):
     out = shared_tmp / "study"
     assert _study(out, "--values", "4,20") == 0
-    rows = _csv(out / "study.csv")
+    rows = read_csv(out / "study.csv")
     assert [float(r["value"]) for r in rows] == [4.0, 20.0]
     assert [r["status"] for r in rows] == ["buckled", "buckled"]
     dirs = [out / r["directory"] for r in rows]
     for d, v in zip(dirs, (4.0, 20.0)):
         c = config.load(d / "config.toml")
         assert c["material"]["film"]["modulus_ratio"] == v and c["geometry"]["length"] == 0.15
-        assert float(rows[[4.0, 20.0].index(v)]["g_c_um"]) == _json(d / "summary.json")["critical"]["growth_um"]
+        assert float(rows[[4.0, 20.0].index(v)]["g_c_um"]) == read_json(d / "summary.json")["critical"]["growth_um"]
     g = [float(r["g_c_um"]) for r in rows]
     assert g[0] > g[1]  # the paper's trend: g_c falls as the film gets stiffer
     for name in ("study.png", "modes.png", "study.json"):
@@ -427,22 +409,22 @@ def test_study_runs_skips_complete_cases_and_reruns_them_with_force(shared_tmp, 
     assert [_mtime(d / "summary.json") for d in dirs] == stamps
     assert _study(out, "--values", "4,20", "--force") == 0
     assert all(_mtime(d / "summary.json") != s for d, s in zip(dirs, stamps))
-    assert [float(r["g_c_um"]) for r in _csv(out / "study.csv")] == pytest.approx(g, rel=1e-12)
+    assert [float(r["g_c_um"]) for r in read_csv(out / "study.csv")] == pytest.approx(g, rel=1e-12)
 
 
 def test_study_error_estimate_runs_coarser_companions(shared_tmp, comm):
     out = shared_tmp / "est"
     assert _study(out, "--values", "8", "--error-estimate") == 0
-    row = _csv(out / "study.csv")[0]
+    row = read_csv(out / "study.csv")[0]
     case = out / row["directory"]
-    s = _json(case / "summary.json")
+    s = read_json(case / "summary.json")
     crit, cfg = s["critical"], config.load(case / "config.toml")
     est = crit["discretization_error"]
     assert cfg["stability"]["error_estimate"] is True
     comp = {}
     for study in ("time", "mesh"):
         d = case / "error-estimate" / study
-        comp[study] = (_json(d / "summary.json"), config.load(d / "config.toml"))
+        comp[study] = (read_json(d / "summary.json"), config.load(d / "config.toml"))
         assert comp[study][0]["status"] == "buckled"
         assert est[f"{study}_companion_g_c_um"] == comp[study][0]["critical"]["growth_um"]
     t_cfg, m_cfg = comp["time"][1], comp["mesh"][1]
@@ -463,8 +445,8 @@ def test_study_error_estimate_runs_coarser_companions(shared_tmp, comm):
 def test_study_isomodes_record_later_crossings(shared_tmp, comm):
     out = shared_tmp / "iso"
     assert _study(out, "--values", "8", "--isomodes", "--set", "stability.max_crossings=3") == 0
-    row = _csv(out / "study.csv")[0]
-    s = _json(out / row["directory"] / "summary.json")
+    row = read_csv(out / "study.csv")[0]
+    s = read_json(out / row["directory"] / "summary.json")
     assert config.load(out / row["directory"] / "config.toml")["stability"]["stop_at_onset"] is False
     crossings = s["crossings"]
     assert len(crossings) == 3 and crossings[0] == {k: s["critical"][k] for k in crossings[0]}
@@ -485,9 +467,9 @@ def test_study_ranks_per_case_two_equals_one(shared_tmp, comm):
     for k in (1, 2):
         out = shared_tmp / f"rpc{k}"
         assert _study(out, "--values", "4,20", "--ranks-per-case", str(k)) == 0
-        rows = _csv(out / "study.csv")
+        rows = read_csv(out / "study.csv")
         g[k] = [(float(r["g_c_um"]), float(r["N_c"])) for r in rows]
-        ranks = [_json(out / r["directory"] / "summary.json")["ranks"] for r in rows]
+        ranks = [read_json(out / r["directory"] / "summary.json")["ranks"] for r in rows]
         assert ranks == [k, k]
     for (g1, n1), (g2, n2) in zip(g[1], g[2]):
         assert g2 == pytest.approx(g1, rel=1e-8)  # measured 2e-14
@@ -496,10 +478,10 @@ def test_study_ranks_per_case_two_equals_one(shared_tmp, comm):
 
 
 def test_sweep_cli_cases_equal_the_same_config_run_alone(shared_tmp, comm):
-    cfg_path, out = _write(shared_tmp / "tiny.toml", TINY), shared_tmp / "sweep"
+    cfg_path, out = write_on_rank0(shared_tmp / "tiny.toml", TINY), shared_tmp / "sweep"
     assert cli.main(["sweep", str(cfg_path), "--param", "material.film.modulus_ratio", "--values", "6,12",
                      "-o", str(out), "-q"]) == 0
-    rows = _csv(out / "study.csv")
+    rows = read_csv(out / "study.csv")
     assert [float(r["value"]) for r in rows] == [6.0, 12.0] and rows[0]["parameter"] == "material.film.modulus_ratio"
     for r, v in zip(rows, (6.0, 12.0)):
         alone = config.load(cfg_path, [f"material.film.modulus_ratio={v}"])
@@ -515,9 +497,9 @@ def test_sweep_cli_cases_equal_the_same_config_run_alone(shared_tmp, comm):
 
 
 def _bench_one_rank(out):
-    cmd = [str(REPO / ".venv" / "bin" / "python"), "-m", "app", "bench", "--ranks", "1", "--sizes", "coarse",
-           "-o", str(out), "-q", "--set", "geometry.length=0.2"]
-    return subprocess.run(cmd, cwd=REPO, env=child_env(), capture_output=True, text=True, timeout=600)
+    cmd = [PYTHON, "-m", "app", "bench", "--ranks", "1", "--sizes", "coarse", "-o", str(out), "-q", "--set",
+           "geometry.length=0.2"]
+    return run_child(cmd, cwd=REPO, timeout=600)
 
 
 def test_bench_ranks_launches_its_own_mpirun(shared_tmp):
@@ -529,14 +511,14 @@ def test_bench_ranks_launches_its_own_mpirun(shared_tmp):
     out = shared_tmp / "bench"
     proc = on_rank0(_bench_one_rank, out)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    doc = _json(out / "bench.json")
+    doc = read_json(out / "bench.json")
     assert list(doc["runs"]) == ["1"] and doc["speedup"] == {}
     run = doc["runs"]["1"]["sizes"]["coarse"]
     assert run["ranks"] == 1 and len(run["peak_rss_mb_per_rank"]) == 1
     cfg = bench.size_config("coarse", ["geometry.length=0.2"])
     ref = on_rank0(lambda: simulate(cfg, shared_tmp / "ref", MPI.COMM_SELF, progress=False)["critical"])
     assert run["g_c_um"] == pytest.approx(ref["growth_um"], rel=1e-12)
-    assert run["dofs"] == _json(out / "run-coarse-np1" / "summary.json")["mesh"]["dofs"]
+    assert run["dofs"] == read_json(out / "run-coarse-np1" / "summary.json")["mesh"]["dofs"]
     assert "| 1 | coarse |" in (out / "bench.md").read_text()
 
 
@@ -576,7 +558,7 @@ def test_quadrature_degree_exact_on_rectangles_small_on_curved_cells(shared_tmp,
     changes the growth, but only by the small quadrature error (measured 3e-7 relative)."""
     g = {}
     for q in (2, 4):
-        cfg = config.load(_write(shared_tmp / "tiny.toml", TINY), [f"mesh.quadrature_degree={q}"])
+        cfg = config.load(write_on_rank0(shared_tmp / "tiny.toml", TINY), [f"mesh.quadrature_degree={q}"])
         g[q] = simulate(cfg, shared_tmp / f"q{q}", comm, progress=False)["critical"]["growth_mm"]
     assert g[4] == pytest.approx(g[2], rel=1e-10)
     growth = {}
@@ -594,7 +576,7 @@ def test_coupling_quadrature_two_points_lock_and_raise_gc(shared_tmp, comm):
     response, higher g_c; degrees 0 and 1 are the same one-point rule."""
     g = {}
     for q in (0, 1, 2):
-        cfg = config.load(_write(shared_tmp / "tiny.toml", TINY), [f"mesh.coupling_quadrature_degree={q}"])
+        cfg = config.load(write_on_rank0(shared_tmp / "tiny.toml", TINY), [f"mesh.coupling_quadrature_degree={q}"])
         g[q] = simulate(cfg, shared_tmp / f"c{q}", comm, progress=False)["critical"]["growth_mm"]
     assert g[0] == pytest.approx(g[1], rel=1e-12)
     assert g[2] > 1.05 * g[1]  # measured +34% on this mesh (README: +25% on the paper-like mesh)
@@ -645,7 +627,7 @@ def _split_substrate(src, dst, y_cut):
 
 
 def _layers_msh(shared_tmp, comm):
-    cfg_path = _write(shared_tmp / "bilayer.toml", TINY)
+    cfg_path = write_on_rank0(shared_tmp / "bilayer.toml", TINY)
     assert cli.main(["mesh", str(cfg_path), "-o", str(shared_tmp / "bilayer.msh")]) == 0
     on_rank0(_split_substrate, shared_tmp / "bilayer.msh", shared_tmp / "layers.msh", 0.1)
     return cfg_path
@@ -698,12 +680,12 @@ def test_user_msh_with_a_third_material(shared_tmp, comm):
     assert coat["mu0"] == pytest.approx(mu0, rel=1e-12)
     assert coat["mu0"] == pytest.approx(chemical_potential(p.materials["coat"], np.eye(2), s0), rel=1e-14)
     # the ramp starts at the mu0 of the film, the material under the permeable top
-    first = _csv(shared_tmp / "run" / "history.csv")[0]
+    first = read_csv(shared_tmp / "run" / "history.csv")[0]
     assert float(first["mu_bar"]) == s["materials"]["film"]["mu0"]
 
 
 def test_auto_wrinkles_around_a_closed_msh_surface(shared_tmp, comm):
-    tube_cfg = _write(shared_tmp / "tube.toml", TINY_TUBE)
+    tube_cfg = write_on_rank0(shared_tmp / "tube.toml", TINY_TUBE)
     assert cli.main(["mesh", str(tube_cfg), "-o", str(shared_tmp / "tube.msh")]) == 0
     user = {"geometry": {"kind": "msh", "file": str(shared_tmp / "tube.msh"),
                          "layers": {"film": "film", "substrate": "substrate"},
@@ -712,7 +694,7 @@ def test_auto_wrinkles_around_a_closed_msh_surface(shared_tmp, comm):
     user["geometry"]["wrinkles"] = "along"  # an explicit choice wins
     assert geometry.build(config.resolve(user), comm).wrinkles == "along"
     # an open permeable surface: the bilayer's top
-    bil = _write(shared_tmp / "b.toml", TINY)
+    bil = write_on_rank0(shared_tmp / "b.toml", TINY)
     assert cli.main(["mesh", str(bil), "-o", str(shared_tmp / "b.msh")]) == 0
     open_user = {"geometry": {"kind": "msh", "file": str(shared_tmp / "b.msh"),
                               "layers": {"film": "film", "substrate": "substrate"},

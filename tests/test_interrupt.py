@@ -6,15 +6,10 @@ failed in 11 of 11 attempts in another (rank 0 blocked writing a progress line, 
 
 from __future__ import annotations
 
-import csv
-import json
 import signal
-import subprocess
-import time
 
-from conftest import REPO, child_env, on_rank0
+from conftest import EXE, finish, on_rank0, read_json, start, valid_history, wait_rows
 
-EXE = str(REPO / ".venv" / "bin" / "hydrobuckle")
 # a tiny homogeneous layer under a slow ramp (no onset, no failure) and a far end time: it runs until stopped
 LONG = """
 [geometry]
@@ -41,40 +36,25 @@ plot = false
 """
 
 
-def _interrupt(cmd, out, sig, rows=5, timeout=300):
+def _interrupt(cmd, out, sig, rows=5):
     """Start ``cmd``, wait until history.csv has ``rows`` data rows, send ``sig``; the finished process."""
-    proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
-    hist = out / "history.csv"
-    t0 = time.monotonic()
+    proc = start(cmd)
     try:
-        while not (hist.is_file() and len(hist.read_text().splitlines()) > rows):
-            assert proc.poll() is None, proc.communicate()
-            assert time.monotonic() - t0 < timeout, "no history rows"
-            time.sleep(0.1)
+        wait_rows(proc, out / "history.csv", rows)
         proc.send_signal(sig)
-        stdout, stderr = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    return proc.returncode, stdout, stderr
+    except BaseException:
+        finish(proc, timeout=0)  # killed at once
+        raise
+    return finish(proc, timeout=60)
 
 
 def _check_results(out, sig_name, ranks, rows=5):
-    summary = json.loads((out / "summary.json").read_text())
-    with open(out / "history.csv", newline="") as f:
-        reader = csv.DictReader(f)
-        table = list(reader)
-        columns = reader.fieldnames
+    summary = read_json(out / "summary.json")
+    table = valid_history(out / "history.csv")  # no torn rows, steps 0..N, times increasing
     assert summary["status"] == "interrupted"
     assert summary["ranks"] == ranks
     assert f"interrupted by {sig_name}" in summary["message"]
     assert len(table) > rows
-    assert all(len(r) == len(columns) and None not in r.values() for r in table)  # no torn rows
-    times = [float(r["time"]) for r in table]
-    assert times == sorted(times) and times[0] == 0.0
-    assert [int(r["step"]) for r in table] == list(range(len(table)))
     # the summary's final state is the last history row, named in the message
     assert summary["steps"] == int(table[-1]["step"])
     assert summary["final"]["time"] == float(table[-1]["time"])

@@ -6,11 +6,10 @@ the materials that exist."""
 
 from __future__ import annotations
 
-import json
 import logging
 
 import pytest
-from conftest import on_rank0
+from conftest import on_rank0, read_json
 
 from app import cli, logging_setup
 
@@ -78,10 +77,6 @@ def _write(path, **kw):
     return str(path)
 
 
-def _summary(out):
-    return json.loads((out / "summary.json").read_text())
-
-
 def test_layers_named_otherwise_run_like_the_built_in_names(msh_files, shared_tmp, comm, capsys):
     std, renamed = msh_files
     ref_cfg = _write(shared_tmp / "std.toml", file=std, end=1.0, materials="",
@@ -96,7 +91,7 @@ def test_layers_named_otherwise_run_like_the_built_in_names(msh_files, shared_tm
     finally:
         logging_setup.setup(comm, logging.WARNING)
     stdout = capsys.readouterr().out
-    ref, got = _summary(shared_tmp / "ref"), _summary(shared_tmp / "out")
+    ref, got = read_json(shared_tmp / "ref" / "summary.json"), read_json(shared_tmp / "out" / "summary.json")
     if comm.rank == 0:
         first = next(line for line in stdout.splitlines() if " mesh with " in line)
         assert "gel mu0 = " in first and "stiff mu0 = " in first and "film" not in first, first
@@ -116,7 +111,7 @@ def test_all_cells_one_material_gel(msh_files, shared_tmp, comm):
                  layers='layers = { skin = "gel", base = "gel" }',
                  materials="[material.layers.gel]\nmodulus_ratio = 1.0")
     assert cli.main(["run", cfg, "-o", str(shared_tmp / "gel"), "-q"]) == 0
-    s = _summary(shared_tmp / "gel")
+    s = read_json(shared_tmp / "gel" / "summary.json")
     assert s["status"] == "stable"
     assert list(s["materials"]) == ["gel"]
     assert (shared_tmp / "gel" / "history.png").stat().st_size > 0

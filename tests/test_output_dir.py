@@ -42,6 +42,7 @@ def _expect_refusal(argv, path, comm, capsys):
         assert f"'{path}'" in lines[0], err
     else:
         assert lines == [], err
+    return lines
 
 
 @pytest.mark.parametrize("command", ["run", "study", "sweep", "converge", "bench"])
@@ -79,6 +80,19 @@ def test_read_only_parent_is_bad_input(shared_tmp, comm, capsys):
         comm.barrier()
         if comm.rank == 0:
             ro.chmod(0o755)
+
+
+@pytest.mark.parametrize("command", ["run", "study", "sweep", "converge", "bench"])
+def test_read_only_file_system_is_bad_input(command, tmpfs, comm, capsys):
+    """A result directory on a file system mounted read-only (root may write anywhere else): refused
+    before anything runs, one line naming the path and the OS's reason, exit 2."""
+    disk = tmpfs("100k", readonly=True)
+    path = str(disk / "out")
+    lines = _expect_refusal(_commands(path)[command], path, comm, capsys)
+    if comm.rank == 0:
+        assert lines[0].endswith(f"no directory can be created in '{disk}' (Read-only file system)"), lines
+    comm.barrier()
+    assert not os.path.exists(path)
 
 
 def test_writable_output_dir_passes_the_check(shared_tmp, comm):

@@ -2,12 +2,15 @@
 
 Rank 0 writes the text files; the XDMF field file is written collectively. A run first removes
 any ``summary.json`` left in the directory, so a directory holds a summary only once the run that
-wrote it has ended (``status`` says how).
+wrote it has ended (``status`` says how). A file that cannot be written (a full disk) does not stop
+the writer with an exception: it records the first :class:`~app.io.writes.ResultWriteError` (the same
+on every rank) in :attr:`ResultWriter.error`, goes on writing what it can, and the run loop stops.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import os
@@ -19,12 +22,20 @@ import numpy as np
 import ufl
 
 from app import compat, config, timing
+from app.io import writes
+from app.io.writes import ResultWriteError
+from app.io.xdmf import ballast_path
 from app.model.material import chemical_potential
 
 MODE_FILES = ("mode.xdmf", "mode.h5", "mode.png", "mode_surface.csv")  # written at the first crossing
 CHECKPOINT_FILES = ("checkpoint.npz", "checkpoint.npz.tmp")  # app.io.checkpoint
 RESULT_FILES = ("summary.json", "history.csv", "config.toml", "fields.xdmf", "fields.h5", "history.png",
                 "mode.xdmf", "mode.h5", "mode.png", "mode_surface.csv")
+# left by a run killed while writing: the space kept aside for closing an XDMF file, a file written aside
+SCRATCH_FILES = (ballast_path("fields.xdmf").name, ballast_path("mode.xdmf").name, writes.SPACE_PROBE,
+                 "history.csv.tmp", "fields.xdmf.tmp", "mode.xdmf.tmp",
+                 *(writes.aside(name).name for name in ("config.toml", "summary.json", "history.png", "mode.png",
+                                                         "mode_surface.csv")))
 
 
 def versions() -> dict:
@@ -54,12 +65,10 @@ def _clean(value):
 
 
 def rewrite_summary(outdir, comm, summary: dict) -> None:
-    """Write summary.json (rank 0, atomically); collective, so every rank may read it afterwards."""
-    if comm.rank == 0:
-        tmp = Path(outdir) / "summary.json.tmp"
-        tmp.write_text(json.dumps(_clean(summary), indent=2) + "\n")
-        tmp.replace(Path(outdir) / "summary.json")
-    comm.barrier()
+    """Write summary.json (rank 0, atomically); collective, so every rank may read it afterwards. A
+    :class:`~app.io.writes.ResultWriteError` on every rank if it cannot be written."""
+    path = Path(outdir) / "summary.json"
+    writes.on_rank0(comm, path, lambda: writes.write_text(path, json.dumps(_clean(summary), indent=2) + "\n"))
 
 
 @dataclass(frozen=True)
@@ -79,7 +88,12 @@ class OutputSettings:
 
 class ResultWriter:
     """Writes one run's results into ``outdir``: what ``settings`` asks for, and the resolved ``cfg``
-    as config.toml (the record of the run)."""
+    as config.toml (the record of the run).
+
+    Only the constructor raises a :class:`~app.io.writes.ResultWriteError` (nothing is computed yet);
+    later a file that cannot be written is recorded in :attr:`error` (the first one, the same on every
+    rank) and the writer goes on with the others: history.csv keeps its whole rows, a field file that
+    failed is not written to again."""
 
     def __init__(self, outdir: str | Path, comm, cfg: dict, settings: OutputSettings, columns=None,
                  resume_rows: list | None = None, keep_mode: bool = False):
@@ -94,74 +108,100 @@ class ResultWriter:
         self.settings = settings
         self.rank0 = comm.rank == 0
         self.columns = list(columns) if columns else None
-        self._csv = None
-        self._writer = None
+        self._history = None  # rank 0: the open history.csv (writes.RowFile)
+        self._header = True  # history.csv still needs its header line
+        self._history_failed = False
         self._xdmf = None
+        self.error: ResultWriteError | None = None
         self.rows: list[dict] = []
         keep = set() if resume_rows is None else {"history.csv", *(MODE_FILES if keep_mode else ())}
-        if self.rank0:
-            self.outdir.mkdir(parents=True, exist_ok=True)
-            for name in RESULT_FILES:
-                if name not in keep:
-                    (self.outdir / name).unlink(missing_ok=True)
-            shutil.rmtree(self.outdir / "error-estimate", ignore_errors=True)
-            if resume_rows is None:
-                for name in CHECKPOINT_FILES:
-                    (self.outdir / name).unlink(missing_ok=True)
-            (self.outdir / "config.toml").write_text(
-                "# hydrobuckle resolved configuration (every key, defaults filled in)\n" + config.dumps(cfg))
-            if resume_rows is not None:
-                self._rewrite_history(resume_rows)
+        writes.on_rank0(comm, self.outdir, self._prepare, keep, resume_rows is None)
+        text = "# hydrobuckle resolved configuration (every key, defaults filled in)\n" + config.dumps(cfg)
+        writes.on_rank0(comm, self.outdir / "config.toml", writes.write_text, self.outdir / "config.toml", text)
         if resume_rows is not None:
+            writes.on_rank0(comm, self.outdir / "history.csv", self._rewrite_history, resume_rows)
             self.rows = list(resume_rows)
-        comm.barrier()
+
+    def _prepare(self, keep: set, new_run: bool) -> None:
+        """Rank 0: the directory, without the result files of an earlier run (and its checkpoint)."""
+        self.outdir.mkdir(parents=True, exist_ok=True)
+        for name in RESULT_FILES + SCRATCH_FILES:
+            if name not in keep:
+                (self.outdir / name).unlink(missing_ok=True)
+        shutil.rmtree(self.outdir / "error-estimate", ignore_errors=True)
+        if new_run:
+            for name in CHECKPOINT_FILES:
+                (self.outdir / name).unlink(missing_ok=True)
+
+    def _record(self, err: ResultWriteError) -> None:
+        if self.error is None:
+            self.error = err
 
     def _rewrite_history(self, rows: list) -> None:
         """Rank 0: history.csv holding exactly ``rows`` (written aside, then renamed), open for appending."""
         path = self.outdir / "history.csv"
         tmp = path.with_name("history.csv.tmp")
-        with open(tmp, "w", newline="") as f:
-            self._csv, self._writer = f, None
+        self._header = True
+        aside = writes.RowFile(tmp, new=True)
+        try:
             for row in rows:
-                self._write_row(row)
-        os.replace(tmp, path)
-        self._csv = open(path, "a", newline="")
-        self._writer = csv.DictWriter(self._csv, fieldnames=self.columns, extrasaction="ignore")
+                aside.append(self._row_text(row))
+            aside.close()
+            os.replace(tmp, path)
+        except BaseException:
+            aside.close()
+            tmp.unlink(missing_ok=True)
+            raise
+        self._history = writes.RowFile(path, new=False)
 
     # --- history ---------------------------------------------------------------------------
 
     def history_row(self, row: dict) -> None:
-        """Append one accepted step to history.csv (flushed immediately)."""
+        """Append one accepted step to history.csv (whole, straight to the file; collective: every rank
+        learns whether it was written). After a failed row no further row is written: the file keeps
+        every row up to the last one written, each whole."""
         with timing.timed("output"):
-            self._history_row(row)
+            self.rows.append(row)
+            if self._history_failed:
+                return
+            path = self.outdir / "history.csv"
+            try:
+                writes.on_rank0(self.comm, path, self._append_row, row)
+            except ResultWriteError as err:
+                self._history_failed = True
+                self._record(err)
 
-    def _history_row(self, row: dict) -> None:
-        self.rows.append(row)
-        if not self.rank0:
-            return
-        if self._csv is None:
-            self._csv = open(self.outdir / "history.csv", "w", newline="")
-        self._write_row(row)
+    def _append_row(self, row: dict) -> None:
+        if self._history is None:
+            self._history, self._header = writes.RowFile(self.outdir / "history.csv", new=True), True
+        self._history.append(self._row_text(row))
 
-    def _write_row(self, row: dict) -> None:
-        """One row, whole and flushed (the header first): a crash leaves valid CSV."""
-        if self._writer is None:
-            self.columns = self.columns or list(row)
-            self._writer = csv.DictWriter(self._csv, fieldnames=self.columns, extrasaction="ignore")
-            self._writer.writeheader()
-        self._writer.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()})
-        self._csv.flush()
+    def _row_text(self, row: dict) -> str:
+        """One CSV row (the header line before the first one)."""
+        buf = io.StringIO()
+        self.columns = self.columns or list(row)
+        w = csv.DictWriter(buf, fieldnames=self.columns, extrasaction="ignore")
+        if self._header:
+            w.writeheader()
+        w.writerow({k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()})
+        text = buf.getvalue()
+        self._header = False
+        return text
 
     # --- fields ----------------------------------------------------------------------------
 
     def setup_fields(self, problem) -> None:
         """Compile the post-processing expressions once (see :data:`FIELDS`), if fields are written."""
-        if not self.settings.fields:
+        if not self.settings.fields or self.error is not None:
             return
         from app.io.xdmf import FieldSeries
 
         domain = problem.domain
-        self._xdmf = FieldSeries(self.comm, self.outdir / "fields.xdmf", domain, "fields")
+        try:
+            self._xdmf = FieldSeries(self.comm, self.outdir / "fields.xdmf", domain, "fields")
+        except ResultWriteError as err:
+            self._record(err)
+            return
         self._fields = []
         for name, space, expr in field_expressions(problem):
             f = compat.Function(space)
@@ -175,7 +215,19 @@ class ResultWriter:
         with timing.timed("output"):
             for f, expr in self._fields:
                 compat.interpolate(f, expr)
-            self._xdmf.write([f for f, _ in self._fields], t)
+            try:
+                self._xdmf.write([f for f, _ in self._fields], t)
+            except ResultWriteError as err:
+                self._record(err)
+                self._close_fields()  # no further output time (the file stays valid up to the last one)
+
+    def _close_fields(self) -> None:
+        if self._xdmf is not None:
+            xdmf, self._xdmf = self._xdmf, None
+            try:
+                xdmf.close()
+            except ResultWriteError as err:
+                self._record(err)
 
     # --- buckling mode ---------------------------------------------------------------------
 
@@ -194,17 +246,24 @@ class ResultWriter:
         base.x.array[:] = crossing.state[u_dofs]
         from app.io.xdmf import FieldSeries
 
-        with FieldSeries(self.comm, self.outdir / "mode.xdmf", problem.domain, "mode") as f:
-            f.write([base, mode], crossing.time)
+        try:
+            with FieldSeries(self.comm, self.outdir / "mode.xdmf", problem.domain, "mode") as f:
+                f.write([base, mode], crossing.time)
+        except ResultWriteError as err:
+            self._record(err)
         polys = _gather_cells(problem, base.x.array, mode.x.array)
         from app.onset.wrinkles import along_profile, around_profile, boundary_displacement
 
         groups = problem.geo.facets_with_role("permeable")
         coords, disp = boundary_displacement(problem, crossing.mode, groups)
         _, state_disp = boundary_displacement(problem, crossing.state, groups)
-        if self.rank0:  # the surface data the study galleries draw from
-            np.savetxt(self.outdir / "mode_surface.csv", np.column_stack([coords, disp, state_disp]), delimiter=",",
-                       header="x,y,mode_ux,mode_uy,state_ux,state_uy", comments="")
+        surface = self.outdir / "mode_surface.csv"  # the surface data the study galleries draw from
+        try:
+            writes.on_rank0(self.comm, surface, writes.replace_file, surface, lambda tmp: np.savetxt(
+                tmp, np.column_stack([coords, disp, state_disp]), delimiter=",",
+                header="x,y,mode_ux,mode_uy,state_ux,state_uy", comments=""))
+        except ResultWriteError as err:
+            self._record(err)
         if problem.geo.wrinkles == "around":
             _, radial, _, theta = around_profile(coords, disp)
             profile = (np.degrees(theta), radial / (np.abs(radial).max() or 1.0), "angle around the passage [deg]",
@@ -213,23 +272,37 @@ class ResultWriter:
             t, un, _ = along_profile(coords, disp)
             profile = (t - t.min(), un / (np.abs(un).max() or 1.0), "position along the surface [mm]",
                        "normal mode displacement")
-        if self.rank0 and self.settings.plot:
+        if self.settings.plot:
             from app.io.plots import mode_plot
 
-            mode_plot(polys, profile, problem.geo, crossing, self.outdir / "mode.png")
+            png = self.outdir / "mode.png"
+            try:
+                writes.on_rank0(self.comm, png, writes.replace_file, png,
+                                lambda tmp: mode_plot(polys, profile, problem.geo, crossing, tmp))
+            except ResultWriteError as err:
+                self._record(err)
 
     # --- summary and plot ------------------------------------------------------------------
 
     def summary(self, data: dict) -> None:
-        rewrite_summary(self.outdir, self.comm, data)
+        """summary.json (a failure is recorded in :attr:`error`)."""
+        try:
+            rewrite_summary(self.outdir, self.comm, data)
+        except ResultWriteError as err:
+            self._record(err)
 
     def plot_history(self, critical: dict | None = None) -> None:
         """history.png, if plots are written; ``critical`` (the summary's block) marks the onset (t_c, g_c)."""
-        if not self.rank0 or not self.rows or not self.settings.plot:
+        if not self.rows or not self.settings.plot:
             return
         from app.io.plots import history_plot
 
-        history_plot(self.rows, self.outdir / "history.png", critical)
+        png = self.outdir / "history.png"
+        try:
+            writes.on_rank0(self.comm, png, writes.replace_file, png,
+                            lambda tmp: history_plot(self.rows, tmp, critical))
+        except ResultWriteError as err:
+            self._record(err)
 
     def plot_branch(self, profiles: list, critical: dict | None, closed: bool) -> None:
         """After a followed branch: wrinkles.png and amplitude.png (if plots are written) and the surface
@@ -247,12 +320,10 @@ class ResultWriter:
         amplitude_plot(self.rows, critical, self.outdir / "amplitude.png")
 
     def close(self) -> None:
-        if self._xdmf is not None:
-            self._xdmf.close()
-            self._xdmf = None
-        if self._csv is not None:
-            self._csv.close()
-            self._csv = None
+        self._close_fields()
+        if self._history is not None:
+            self._history.close()
+            self._history = None
 
 
 # name, meaning; every field of fields.xdmf, on one grid per output time

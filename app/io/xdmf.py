@@ -50,38 +50,126 @@ def rearrange(path: str | Path, name: str) -> int:
                 grid.append(a)
     ET.indent(out, "  ")
     tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        f.write(b'<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n')
-        ET.ElementTree(out).write(f, encoding="utf-8", xml_declaration=False)
-        f.write(b"\n")
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(b'<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n')
+            ET.ElementTree(out).write(f, encoding="utf-8", xml_declaration=False)
+            f.write(b"\n")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)  # the file as it was (a full disk: no partial copy left)
+        raise
     return len(steps)
+
+
+def ballast_path(path: str | Path) -> Path:
+    """The hidden file that keeps space aside for the close of the XDMF file ``path`` while it is open."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.reserve")
 
 
 class FieldSeries:
     """A temporal series of several functions on one mesh, written through dolfinx's XDMFFile and
-    kept rearranged into one dataset after each output time (see :func:`rearrange`)."""
+    kept rearranged into one dataset after each output time (see :func:`rearrange`).
+
+    Every write is collective and either succeeds on every rank or raises the same
+    :class:`~app.io.writes.ResultWriteError` on every rank (naming the .h5 file, or the .xdmf file for
+    its XML): rank 0 first reserves the bytes the write needs (:func:`app.io.writes.reserve`), so a full
+    disk stops it before any rank enters HDF5; an HDF5 failure all the same is agreed on by every rank,
+    and the file is then abandoned, never closed (:func:`app.compat.abandon`)."""
+
+    BALLAST = 64 * 1024  # kept aside for the close, which writes HDF5's last metadata (measured: 4 kB)
 
     def __init__(self, comm, path: str | Path, domain, name: str):
         from app import compat
 
         self.comm, self.path, self.name = comm, Path(path), name
-        self._file = compat.xdmf_writer(comm, str(self.path))
-        self._file.write_mesh(domain)
+        self.h5 = self.path.with_suffix(".h5")
+        self.ballast = ballast_path(self.path)
+        self._file = None
+        self._grown = 0  # rank 0: the .h5's growth in the last write (a measured size for the next)
+
+        def create():
+            self._file = compat.xdmf_writer(comm, str(self.path))
+
+        try:
+            self._collective([create, lambda: self._file.write_mesh(domain)], compat.xdmf_mesh_bytes(domain))
+        except Exception:
+            from app.io import writes
+
+            writes.release(comm, self.ballast)
+            raise
+
+    def _need(self, data_bytes: int) -> int | None:
+        """Rank 0: the bytes to reserve for a write of ``data_bytes`` of data (None elsewhere): the larger
+        of that and the last write's growth, a quarter more (HDF5's object headers), and the XML twice
+        (dolfinx rewrites it, then :func:`rearrange` writes it aside)."""
+        if self.comm.rank != 0:
+            return None
+        xml = self.path.stat().st_size if self.path.is_file() else 0
+        return int(1.25 * max(data_bytes, self._grown)) + 2 * xml + 8192
+
+    def _collective(self, actions, data_bytes: int | None) -> None:
+        """Run the HDF5 ``actions`` on every rank, after reserving their space (unless ``data_bytes`` is
+        None), and agree on the outcome of each before the next: a rank that failed must not leave the
+        others inside the next one's collectives (measured: a hang when they agreed only after all)."""
+        from app import compat
+        from app.io import writes
+
+        size0 = self.h5.stat().st_size if self.comm.rank == 0 and self.h5.is_file() else 0
+        if data_bytes is not None:
+            writes.reserve(self.comm, self.path.parent, self._need(data_bytes), self.h5, self.ballast,
+                           self.BALLAST)
+        for action in actions:
+            local = None
+            with compat.HDF5Errors() as errors:
+                try:
+                    action()
+                except RuntimeError as err:
+                    local = (errors.os_reason(), errors.reason(err))
+            failures = self.comm.allgather(local)
+            if any(failures):
+                self._abandon()
+                reason = None
+                if self.comm.rank == 0:  # the OS's words where HDF5 recorded them, else ask the file system
+                    known = [f for f in failures if f]
+                    reason = (next((os_reason for os_reason, _ in known if os_reason), None)
+                              or writes.space_problem(self.path.parent, self._need(data_bytes or 0))
+                              or known[0][1])
+                raise writes.ResultWriteError(self.h5, self.comm.bcast(reason, root=0))
+        if self.comm.rank == 0 and self.h5.is_file():
+            self._grown = max(0, self.h5.stat().st_size - size0)
+
+    def _abandon(self) -> None:
+        from app import compat
+        from app.io import writes
+
+        if self._file is not None:
+            compat.abandon(self._file)
+            self._file = None
+        writes.release(self.comm, self.ballast)
 
     def write(self, functions, t: float) -> None:
-        for f in functions:
-            self._file.write_function(f, t)
+        from app import compat
+
+        if self._file is None:
+            return
+        functions = list(functions)
+        self._collective([lambda f=f: self._file.write_function(f, t) for f in functions],
+                         sum(compat.xdmf_function_bytes(f) for f in functions))
         self._rearrange()
 
     def _rearrange(self) -> None:
-        if self.comm.rank == 0:
-            rearrange(self.path, self.name)
-        self.comm.barrier()
+        from app.io import writes
+
+        writes.on_rank0(self.comm, self.path, rearrange, self.path, self.name)
 
     def close(self) -> None:
+        from app.io import writes
+
         if self._file is not None:
-            self._file.close()
+            writes.release(self.comm, self.ballast)
+            self._collective([self._file.close], None)
             self._file = None
             self._rearrange()  # in case closing rewrote dolfinx's own layout
 
@@ -89,4 +177,10 @@ class FieldSeries:
         return self
 
     def __exit__(self, *exc):
-        self.close()
+        from app.io import writes
+
+        try:
+            self.close()
+        except writes.ResultWriteError:
+            if exc[0] is None:
+                raise

@@ -27,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from app import config, logging_setup, timing
+from app import config, interrupt, logging_setup, timing
 
 SIZES = {"coarse": 2.0, "default": 1.0, "fine": 0.7, "finer": 0.5}  # element size x s, film layers / s
 
@@ -43,13 +43,15 @@ def size_config(name: str, overrides: list[str]) -> dict:
                          "output.checkpoint_every": 0})  # timings of the solver, not of checkpoints
 
 
-def bench_one(cfg: dict, comm, outdir: Path) -> dict:
+def bench_one(cfg: dict, comm, outdir: Path) -> dict | None:
     from app.workflows.run import simulate
 
     timing.reset()
     t0 = time.perf_counter()
     s = simulate(cfg, outdir, comm, progress=False)
     wall = time.perf_counter() - t0
+    if s["status"] == "interrupted":
+        return None
     tt = timing.totals
     fact, _ = timing.petsc_event_time(timing.FACTOR_EVENTS, "newton")
     num_time, n_num = timing.petsc_event_time(("MatLUFactorNum", "MatCholFctrNum"), "newton")
@@ -105,14 +107,25 @@ def _newton_iterations(outdir: Path) -> int:
     return total
 
 
-def run_bench(sizes: list[str], overrides: list[str], outdir: Path, comm) -> dict:
+class BenchFailed(Exception):
+    """A launch of ``bench --ranks`` that failed (one line; the CLI exits 1)."""
+
+
+def run_bench(sizes: list[str], overrides: list[str], outdir: Path, comm) -> dict | None:
+    """The timings of every size, or None once SIGINT/SIGTERM stopped a run or came between two sizes
+    (no further size starts: a benchmark cannot be resumed, its runs would be timed in parts)."""
     log = logging_setup.get()
     results = {}
     for name in sizes:
+        if interrupt.pending(comm):
+            log.info(f"bench: interrupted: size {name} and later ones not run")
+            return None
         cfg = size_config(name, overrides)
         log.info(f"bench: {name} mesh (element size {cfg['mesh']['element_size']:g} mm, "
                  f"{cfg['mesh']['film_layers']} film layers) on {comm.size} rank(s)")
         results[name] = bench_one(cfg, comm, outdir / f"run-{name}-np{comm.size}")
+        if results[name] is None:
+            return None
     fit = _loglog_fit([(r["dofs"], r["time_per_step_s"]) for r in results.values()])
     fit_f = _loglog_fit([(r["dofs"], r["t_factor_s"]) for r in results.values()])
     return {"ranks": comm.size, "sizes": results, "time_per_step_vs_dofs_exponent": fit,
@@ -130,10 +143,15 @@ def _loglog_fit(points) -> float | None:
     return sum((p[0] - mx) * (p[1] - my) for p in pts) / den if den else None
 
 
-def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdir: Path) -> dict:
-    """Run the benchmark under ``mpirun -n k`` for each k (a fresh launch each) and combine."""
+def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdir: Path) -> dict | None:
+    """Run the benchmark under ``mpirun -n k`` for each k (a fresh launch each) and combine; None once
+    interrupted (SIGINT/SIGTERM here or in a launch); :class:`BenchFailed` if a launch fails."""
+    from mpi4py import MPI
+
     out = {}
     for k in ranks:
+        if interrupt.pending(MPI.COMM_SELF):
+            return None
         with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
             tmp = f.name
         cmd = ["mpirun", "-n", str(k), "--oversubscribe", sys.executable, "-m", "app", "bench", "--sizes",
@@ -144,9 +162,15 @@ def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdi
         if os.getuid() == 0:
             env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
         env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-        subprocess.run(cmd, check=True, env=env)
-        out[k] = json.loads(Path(tmp).read_text())
-        os.unlink(tmp)
+        code = subprocess.run(cmd, env=env).returncode
+        try:
+            if interrupt.pending(MPI.COMM_SELF) or code in interrupt.EXIT_CODES.values():
+                return None  # a Ctrl-C reaches this process too (mpirun itself then exits 1)
+            if code != 0:
+                raise BenchFailed(f"bench: `mpirun -n {k} ... bench --json-only` exited with code {code}")
+            out[k] = json.loads(Path(tmp).read_text())
+        finally:
+            os.unlink(tmp)
     return out
 
 

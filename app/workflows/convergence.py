@@ -10,6 +10,12 @@ For each study the three finest levels give a Richardson estimate: observed orde
 p = log(|g0 - g1| / |g1 - g2|) / log r, converged value g_inf = g2 + (g2 - g1)/(r^p - 1), and each
 level's error |g_k - g_inf|. The base configuration's total error estimate is the sum of its time
 and mesh errors; its converged estimate adds both corrections.
+
+Rerun into the same directory, converge continues where an earlier invocation stopped (SIGINT,
+SIGTERM, a kill, a full disk): a level whose directory holds its finished run is kept, an interrupted
+or killed level resumes from its checkpoint (:mod:`app.workflows.reruns`; ``force``: every level
+anew). The tables are removed when a converge starts and written when it ends; an interrupted one
+writes what ran with ``"status": "interrupted"`` and no estimate (convergence.md says so first).
 """
 
 from __future__ import annotations
@@ -20,8 +26,11 @@ import math
 from pathlib import Path
 
 from app import config, interrupt, logging_setup
+from app.workflows import reruns
 from app.workflows.run import simulate
 from app.workflows.variants import variant
+
+TABLES = ("convergence.csv", "convergence.json", "convergence.md", "convergence.png")
 
 
 def richardson(values: list[float], ratio: float) -> dict:
@@ -81,14 +90,43 @@ def refined_configs(cfg: dict, study: str, levels: int, time_factor: float, mesh
     return out
 
 
+def _level(c: dict, d: Path, comm, label: str, force: bool, log) -> dict:
+    """One level's summary: kept from an earlier converge (finished, the same config), resumed from its
+    checkpoint, or run."""
+    from app.io.checkpoint import CheckpointError
+
+    if not force:
+        done = comm.bcast(reruns.finished(c, d) if comm.rank == 0 else None, root=0)
+        if done is not None:
+            log.info(f"converge: {label}: finished by an earlier converge, kept")
+            return done
+        resume = reruns.resumable(c, d, comm, log, f"converge: {label}")
+        if resume is not None:
+            log.info(f"converge: {label}: resuming at step {resume.meta['step']}")
+            try:
+                return simulate(c, d, comm, resume=resume)
+            except CheckpointError as err:  # the checkpoint does not fit the rebuilt mesh: start anew
+                log.info(f"converge: {label}: {err}; running from the start")
+    return simulate(c, d, comm)
+
+
 def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"), time_factor: float = 4.0,
-             mesh_factor: float = 2.0, coarsen: bool = False) -> dict:
+             mesh_factor: float = 2.0, coarsen: bool = False, force: bool = False) -> dict:
     """Run the refinement studies; write convergence.csv/.json/.md/.png; return the report."""
+    from app.io import writes
+
     plans = {study: refined_configs(cfg, study, levels, time_factor, mesh_factor, coarsen) for study in studies}
     log = logging_setup.get()
     outdir = Path(outdir)
+
+    def clear():  # a directory holds the tables only once a converge has ended (or says it stopped)
+        outdir.mkdir(parents=True, exist_ok=True)
+        for name in TABLES:
+            (outdir / name).unlink(missing_ok=True)
+
+    writes.on_rank0(comm, outdir, clear)
     rows = []
-    report: dict = {"base": {}, "studies": {}, "direction": "coarsen" if coarsen else "refine"}
+    report: dict = {"status": "complete", "base": {}, "studies": {}, "direction": "coarsen" if coarsen else "refine"}
     base_summary = None
     stopped = False
     for study in studies:
@@ -104,7 +142,7 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
                 break
             else:
                 log.info(f"converge: {label} ({'tolerance' if study == 'time' else 'element_size'} = {value:g})")
-                s = simulate(c, outdir / ("base" if level == 0 else label), comm)
+                s = _level(c, outdir / ("base" if level == 0 else label), comm, label, force, log)
                 if level == 0:
                     base_summary = s
             crit = s.get("critical", {})
@@ -114,6 +152,11 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
                    "dofs": s["mesh"]["dofs"], "steps": s["steps"], "wall_time_s": s["wall_time_s"]}
             rows.append(row)
             values.append(row["g_c_um"])
+            stopped = stopped or s["status"] == "interrupted"
+        if stopped:  # a part of the levels: no estimate
+            report["status"] = "interrupted"
+            report["studies"][study] = {"values": values, "N_c": [r["N_c"] for r in rows if r["study"] == study]}
+            continue
         ratio = 2.0 if study == "time" else mesh_factor
         if coarsen:  # Richardson wants coarse -> fine; map its errors back to the levels
             rich = richardson(values[::-1], ratio)
@@ -125,15 +168,14 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
         rich["N_c"] = [r["N_c"] for r in rows if r["study"] == study]
         report["studies"][study] = rich
     base = next((r for r in rows if r["level"] == 0), None)
-    if base is not None and base["g_c_um"] is not None:
+    if base is not None and base["g_c_um"] is not None and not stopped:
         g = base["g_c_um"]
         corr = sum((st["converged"] - g) for st in report["studies"].values() if st["converged"] is not None)
         err = sum(st["errors"][0] for st in report["studies"].values() if st["errors"])
         report["base"] = {"g_c_um": g, "N_c": base["N_c"], "converged_estimate_um": g + corr,
                           "error_estimate_um": err, "relative_error": err / abs(g + corr) if g + corr else None}
-    if comm.rank == 0:
-        _write(outdir, rows, report)
-    comm.barrier()  # every rank may read convergence.json once this returns
+    if rows:
+        writes.on_rank0(comm, outdir, _write, outdir, rows, report)  # every rank may read them afterwards
     b = report["base"]
     if b:
         log.info(f"converge: base g_c = {b['g_c_um']:.4f} um, converged estimate {b['converged_estimate_um']:.4f} um, "
@@ -142,29 +184,41 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
 
 
 def _write(outdir: Path, rows: list[dict], report: dict) -> None:
-    outdir.mkdir(parents=True, exist_ok=True)
-    with open(outdir / "convergence.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    (outdir / "convergence.json").write_text(json.dumps({"rows": rows, **report}, indent=2) + "\n")
-    lines = ["| study | level | parameter | film layers | dofs | steps | g_c [um] | N_c | error est. [um] |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    """Rank 0: the tables, each written aside and renamed (a failure names its file)."""
+    from app.io import writes
+    from app.io.plots import convergence_plot
+
+    def table(tmp):
+        with open(tmp, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+
+    lines = []
+    if report["status"] != "complete":
+        lines += ["INTERRUPTED: not every level ran, so there is no estimate. Rerun the same command to continue "
+                  "(finished levels are kept, an interrupted level resumes from its checkpoint).", ""]
+    lines += ["| study | level | parameter | film layers | dofs | steps | g_c [um] | N_c | error est. [um] |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         st = report["studies"][r["study"]]
-        err = st["errors"][r["level"]] if st["errors"] else None
+        err = st["errors"][r["level"]] if st.get("errors") else None
         lines.append(f"| {r['study']} | {r['level']} | {r['parameter']:g} | {r['film_layers']} | {r['dofs']} | "
                      f"{r['steps']} | {_fmt(r['g_c_um'])} | {_fmt(r['N_c'])} | {_fmt(err)} |")
     for name, st in report["studies"].items():
-        lines.append(f"\n{name}: observed order {_fmt(st['order'])}, converged g_c {_fmt(st['converged'])} um")
+        if "order" in st:
+            lines.append(f"\n{name}: observed order {_fmt(st['order'])}, converged g_c {_fmt(st['converged'])} um")
     if report["base"]:
         b = report["base"]
         lines.append(f"\nbase: g_c = {b['g_c_um']:.4f} um, converged estimate {b['converged_estimate_um']:.4f} um, "
                      f"estimated error {b['error_estimate_um']:.4f} um")
-    (outdir / "convergence.md").write_text("\n".join(lines) + "\n")
-    from app.io.plots import convergence_plot
-
-    convergence_plot(rows, report, outdir / "convergence.png")
+    files = {"convergence.csv": table,
+             "convergence.json": lambda tmp: tmp.write_text(json.dumps({"rows": rows, **report}, indent=2) + "\n"),
+             "convergence.md": lambda tmp: tmp.write_text("\n".join(lines) + "\n")}
+    if report["status"] == "complete":
+        files["convergence.png"] = lambda tmp: convergence_plot(rows, report, tmp)
+    for name, write in files.items():
+        writes.at(outdir / name, writes.replace_file, outdir / name, write)
 
 
 def _fmt(v):

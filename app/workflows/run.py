@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass
 from app import interrupt, logging_setup, timing
 from app.io import checkpoint
 from app.io.output import OutputSettings, ResultWriter, versions
+from app.io.writes import ResultWriteError
 from app.model.problem import Problem
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
@@ -66,7 +67,11 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     ``resume``: ``outdir``'s checked checkpoint (:func:`app.io.checkpoint.check`) to continue from; the
     directory is not touched before its state is in place (a :class:`~app.io.checkpoint.CheckpointError`
     before that leaves it as it was). ``stop_after``: stop as an interrupt would (checkpoint, status
-    "interrupted") once this many steps are accepted (tests)."""
+    "interrupted") once this many steps are accepted (tests).
+
+    A result file that cannot be written (a full disk) stops the run after the current step, as a solver
+    failure does (status "failed", the checkpoint of that step if it can be written, everything else
+    that can be written); then the :class:`~app.io.writes.ResultWriteError` is raised, on every rank."""
     log = logging_setup.get()
     detail = log.info if progress else log.debug
     wall0 = time.perf_counter()
@@ -86,13 +91,13 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     if resume:
         try:
             checkpoints.resumed(checkpoint.restore(resume, problem, stepper, tracker), stepper.step)
+            writer = ResultWriter(outdir, comm, cfg, settings.output, columns=columns, resume_rows=resume.rows,
+                                  keep_mode=resume.crossings > 0)
         except BaseException:
             watch.__exit__()
             stepper.destroy()
             tracker.destroy()
             raise
-        writer = ResultWriter(outdir, comm, cfg, settings.output, columns=columns, resume_rows=resume.rows,
-                              keep_mode=resume.crossings > 0)
     mats = problem.materials
     log.info(f"hydrobuckle: {cfg['geometry']['kind']} mesh with {problem.cells()} cells, {problem.dofs()} dofs "
              f"on {comm.size} rank(s); " + ", ".join(f"{name} mu0 = {m.mu0:.4f} MPa" for name, m in mats.items()))
@@ -111,6 +116,12 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     profiles, closed = [], False
     try:
         while not stepper.done():
+            if writer.error is not None:  # agreed on every rank
+                status, message = "failed", str(writer.error)
+                log.info(f"hydrobuckle: {message}; stopping after {stepper.step} steps")
+                with timing.timed("output"):
+                    checkpoints.write(problem, stepper, tracker, writer.rows)
+                break
             sig = watch.requested()  # collective: every rank leaves after the same step
             if sig or (stop_after is not None and stepper.step >= stop_after):
                 status = "interrupted"
@@ -165,9 +176,16 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         c = tracker.crossings[0]
         log.info(f"hydrobuckle: critical growth g_c = {1e3 * c.growth_mm:.4f} um at t_c = {c.time:.6f} s, "
                  f"wrinkle count N_c = {c.wrinkle_count:g}")
-    for step in after:
-        step(summary)
+    try:
+        for step in after if writer.error is None else ():
+            step(summary)
+    except ResultWriteError as err:  # a companion run's file
+        writer.error = writer.error or err
+    if writer.error is not None:
+        summary.update(status="failed", message=str(writer.error))
     writer.summary(summary)
+    if writer.error is not None:  # the checkpoint stays (a summary.json that failed: the run can be resumed)
+        raise writer.error
     if summary["status"] not in ("interrupted", "failed"):  # ended normally: nothing to resume
         checkpoints.remove(comm)
     return summary

@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from app import config, interrupt, logging_setup
+from app.workflows.reruns import COMPLETE, finished, resumable  # noqa: F401 - COMPLETE: read by the CLI
 from app.workflows.variants import variant
 
-COMPLETE = ("buckled", "stable", "equilibrium")  # statuses of a finished case (resume skips it)
 ISOMODE_CROSSINGS = 6  # later crossings tracked per case for isomode curves
 
 
@@ -138,22 +138,18 @@ def _toml(v) -> str:
 
 
 def is_complete(case: Case) -> bool:
-    summary, cfg_file = case.outdir / "summary.json", case.outdir / "config.toml"
-    if not summary.is_file() or not cfg_file.is_file():
-        return False
-    try:
-        s = json.loads(summary.read_text())
-        return s.get("status") in COMPLETE and config.load(cfg_file) == case.cfg
-    except (ValueError, config.ConfigError):
-        return False
+    return finished(case.cfg, case.outdir) is not None
 
 
 def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = False) -> None:
     """Run every case (skipping complete ones) on groups of ``ranks_per_case`` ranks. A case with a
     checkpoint of its config (an interrupted or killed case) continues from it, unless ``force`` (every
     case anew). After SIGINT/SIGTERM each group stops once its current case has stopped: the cases
-    it has not started are left without a directory."""
+    it has not started are left without a directory. A result file that cannot be written (a full
+    disk) stops its group the same way, and then every rank raises that
+    :class:`~app.io.writes.ResultWriteError` (the first group's, in rank order)."""
     from app.io.checkpoint import CheckpointError
+    from app.io.writes import ResultWriteError
     from app.workflows.pipeline import run_case
 
     log = logging_setup.get()
@@ -162,6 +158,7 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
     color = comm.rank // k if comm.rank < n_groups * k else n_groups  # leftover ranks idle
     sub = comm.Split(color, comm.rank)
     watch = interrupt.Watch(sub).__enter__()  # a signal between cases is recorded too
+    write_error = None
     try:
         for i, case in enumerate(cases):
             if color >= n_groups or i % n_groups != color:
@@ -186,32 +183,33 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
                     if sub.rank == 0:
                         log.info(f"study: {case.label}: {err}; running from the start")
                     run_case(case.cfg, case.outdir, sub, progress=False)
+            except ResultWriteError as err:  # agreed in the group: no further case can be written either
+                write_error = (err.path, err.reason)
+                if sub.rank == 0:
+                    log.info(f"study: {case.label}: {err}; the group's later cases not started")
+                break
             except Exception as err:  # a failed case is reported, the others go on
                 if sub.rank == 0:
                     log.info(f"study: {case.label}: failed: {err}")
-                    case.outdir.mkdir(parents=True, exist_ok=True)
-                    (case.outdir / "error.txt").write_text(f"{type(err).__name__}: {err}\n")
+                    try:
+                        case.outdir.mkdir(parents=True, exist_ok=True)
+                        (case.outdir / "error.txt").write_text(f"{type(err).__name__}: {err}\n")
+                    except OSError:
+                        pass
             if sub.rank == 0:
                 log.info(f"study: {case.label}: done in {time.perf_counter() - t0:.1f} s")
     finally:
         watch.__exit__()
-        comm.barrier()
+        errors = comm.allgather(write_error)  # also the barrier that keeps the groups in step
         sub.Free()
+    first = next((e for e in errors if e), None)
+    if first is not None:
+        raise ResultWriteError(*first)
 
 
 def _checkpoint(case: Case, comm, log):
     """The case directory's checkpoint if its config may resume it (else None, with the reason logged)."""
-    from app.io import checkpoint
-
-    has = comm.bcast((case.outdir / checkpoint.FILE).is_file() if comm.rank == 0 else None, root=0)
-    if not has:
-        return None
-    try:
-        return checkpoint.check(case.outdir, case.cfg, comm)
-    except checkpoint.CheckpointError as err:
-        if comm.rank == 0:
-            log.info(f"study: {case.label}: {err}; running from the start")
-        return None
+    return resumable(case.cfg, case.outdir, comm, log, f"study: {case.label}")
 
 
 COLUMNS = ("series", "parameter", "value", "status", "g_c_um", "g_c_error_um", "N_c", "t_c", "mu_c",
@@ -242,28 +240,41 @@ def collect(cases: list[Case], param: str) -> list[dict]:
 
 
 def write_tables(rows: list[dict], outdir: Path, title: str, param: str) -> None:
-    outdir.mkdir(parents=True, exist_ok=True)
-    with open(outdir / "study.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=COLUMNS)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: ("" if r[k] is None else r[k]) for k in COLUMNS})
+    """Rank 0: study.csv, study.png, modes.png (and isomodes.png), each written aside and renamed; a
+    failure names its file (a :class:`~app.io.writes.ResultWriteError`)."""
+    from app.io import writes
     from app.io.plots import isomode_plot, modes_gallery, study_plot
 
-    study_plot(rows, title, param, outdir / "study.png")
-    modes_gallery(rows, outdir, title, outdir / "modes.png")
+    writes.at(outdir, outdir.mkdir, parents=True, exist_ok=True)
+
+    def table(tmp):
+        with open(tmp, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=COLUMNS)
+            w.writeheader()
+            for r in rows:
+                w.writerow({k: ("" if r[k] is None else r[k]) for k in COLUMNS})
+
+    files = {"study.csv": table, "study.png": lambda tmp: study_plot(rows, title, param, tmp),
+             "modes.png": lambda tmp: modes_gallery(rows, outdir, title, tmp)}
     if any(r["crossings"] and ";" in r["crossings"] for r in rows):
-        isomode_plot(rows, title, param, outdir / "isomodes.png")
+        files["isomodes.png"] = lambda tmp: isomode_plot(rows, title, param, tmp)
+    for name, write in files.items():
+        writes.at(outdir / name, writes.replace_file, outdir / name, write)
 
 
 def run_study(cases: list[Case], outdir: Path, comm, title: str, param: str, ranks_per_case: int = 1,
               force: bool = False) -> list[dict]:
+    from app.io import writes
+
     run_cases(cases, comm, ranks_per_case, force)
     rows = collect(cases, param) if comm.rank == 0 else None
-    if comm.rank == 0:
+
+    def tables():
         write_tables(rows, outdir, title, param)
-        (outdir / "study.json").write_text(json.dumps({"title": title, "parameter": param, "rows": rows},
-                                                      indent=2, default=_json_default) + "\n")
+        text = json.dumps({"title": title, "parameter": param, "rows": rows}, indent=2, default=_json_default)
+        writes.at(outdir / "study.json", writes.write_text, outdir / "study.json", text + "\n")
+
+    writes.on_rank0(comm, outdir, tables)
     return comm.bcast(rows, root=0)
 
 

@@ -1,0 +1,43 @@
+"""What a rerun of a command that runs several directories (study, sweep, converge) keeps from the
+invocation before it, which an interrupt, a kill or a full disk stopped: a directory that already
+holds this config's finished run is kept (:func:`finished`), an interrupted or killed run continues
+from its checkpoint (:func:`resumable`). ``--force`` on those commands starts every run anew.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from app import config
+
+COMPLETE = ("buckled", "stable", "equilibrium")  # statuses of a finished run (a rerun keeps it)
+
+
+def finished(cfg: dict, outdir) -> dict | None:
+    """The summary of a finished run of exactly ``cfg`` in ``outdir`` (its config.toml equal to ``cfg``,
+    a status in :data:`COMPLETE`), else None."""
+    summary, cfg_file = Path(outdir) / "summary.json", Path(outdir) / "config.toml"
+    if not summary.is_file() or not cfg_file.is_file():
+        return None
+    try:
+        s = json.loads(summary.read_text())
+        return s if s.get("status") in COMPLETE and config.load(cfg_file) == cfg else None
+    except (ValueError, OSError, config.ConfigError):
+        return None
+
+
+def resumable(cfg: dict, outdir, comm, log, label: str):
+    """The checkpoint in ``outdir`` if ``cfg`` may resume it (collective), else None; a checkpoint of
+    another config is logged (``label``: the command and case) and the run starts anew."""
+    from app.io import checkpoint
+
+    has = comm.bcast((Path(outdir) / checkpoint.FILE).is_file() if comm.rank == 0 else None, root=0)
+    if not has:
+        return None
+    try:
+        return checkpoint.check(outdir, cfg, comm)
+    except checkpoint.CheckpointError as err:
+        if comm.rank == 0:
+            log.info(f"{label}: {err}; running from the start")
+        return None
