@@ -442,7 +442,7 @@ def cmd_bench(args) -> int:
         return EXIT_OK
     if args.json_only:
         return EXIT_OK
-    text = bench.table(doc)
+    text = bench.table(doc) if comm.rank == 0 else ""  # the per-rank memory is gathered on rank 0 only
 
     def files():
         writes.at(outdir, outdir.mkdir, parents=True, exist_ok=True)
