@@ -57,3 +57,16 @@ fields = false
 plot = false
 checkpoint_every = 10
 """
+
+
+# The geometry and mesh of a 0.15 mm wide bilayer (15 x 2 film elements), as TOML: tests append their own tables.
+TINY_BILAYER_TOML = """
+[geometry]
+length = 0.15
+substrate_thickness = 0.15
+film_thickness = 0.01
+[mesh]
+element_size = 0.01
+film_layers = 2
+substrate_grading = 1.25
+"""

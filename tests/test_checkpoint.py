@@ -26,7 +26,7 @@ import zipfile
 import numpy as np
 import pytest
 import ufl
-from cases import LONG, swelling_case
+from cases import LONG, TINY_BILAYER_TOML, swelling_case
 from conftest import (
     EXE,
     MPIRUN,
@@ -541,16 +541,7 @@ fields = false
 plot = false
 checkpoint_every = 2
 """
-MSH_MESH = """
-[geometry]
-length = 0.15
-substrate_thickness = 0.15
-film_thickness = 0.01
-[mesh]
-element_size = 0.01
-film_layers = 2
-substrate_grading = 1.25
-"""
+MSH_MESH = TINY_BILAYER_TOML
 
 
 def test_user_msh_resumes_and_an_edited_file_is_refused(shared_tmp, comm, capsys):

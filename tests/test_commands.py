@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cases import TINY_BILAYER_TOML
 from conftest import PYTHON, REPO, on_rank0, read_csv, read_json, run_child, run_to_end, write_on_rank0
 from mpi4py import MPI
 
@@ -28,15 +29,7 @@ from app.model.material import chemical_potential
 from app.workflows.run import simulate
 
 # A bilayer that buckles in about 0.4 s (0.15 mm wide, 15 x 2 film elements).
-TINY = """
-[geometry]
-length = 0.15
-substrate_thickness = 0.15
-film_thickness = 0.01
-[mesh]
-element_size = 0.01
-film_layers = 2
-substrate_grading = 1.25
+TINY = TINY_BILAYER_TOML + """
 [time]
 end = 1.0
 dt_initial = 0.001

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 
 import pytest
+from cases import TINY_BILAYER_TOML
 from conftest import on_rank0, read_json
 
 from app import cli, logging_setup
@@ -29,16 +30,7 @@ error_estimate = false
 {materials}
 """
 
-BILAYER = """
-[geometry]
-length = 0.15
-substrate_thickness = 0.15
-film_thickness = 0.01
-[mesh]
-element_size = 0.01
-film_layers = 2
-substrate_grading = 1.25
-"""
+BILAYER = TINY_BILAYER_TOML
 
 
 def _rename(src, dst, names):

@@ -305,19 +305,34 @@ class ResultWriter:
             self._record(err)
 
     def plot_branch(self, profiles: list, critical: dict | None, closed: bool) -> None:
-        """After a followed branch: wrinkles.png and amplitude.png (if plots are written) and the surface
-        profiles themselves, profiles.npz (growth, time, position and profile of every step on the branch)."""
-        if not self.rank0 or not profiles:
-            return
-        np.savez_compressed(self.outdir / "profiles.npz", growth_mm=np.array([p[0] for p in profiles]),
-                            time=np.array([p[1] for p in profiles]),
-                            position=np.array([p[2] for p in profiles]), profile=np.array([p[3] for p in profiles]))
-        if not self.settings.plot:
+        """After a followed branch: the surface profiles themselves, profiles.npz (growth, time, position and
+        profile of every step on the branch), and wrinkles.png and amplitude.png if plots are written
+        (collective, like :meth:`plot_history`)."""
+        if not profiles:
             return
         from app.io.plots import amplitude_plot, wrinkles_plot
 
-        wrinkles_plot(profiles, critical, closed, self.outdir / "wrinkles.png")
-        amplitude_plot(self.rows, critical, self.outdir / "amplitude.png")
+        arrays = {"growth_mm": [p[0] for p in profiles], "time": [p[1] for p in profiles],
+                  "position": [p[2] for p in profiles], "profile": [p[3] for p in profiles]}
+
+        def save_npz(tmp):
+            with open(tmp, "wb") as f:
+                np.savez_compressed(f, **{k: np.array(v) for k, v in arrays.items()})
+
+        outputs = [("profiles.npz", save_npz)]
+        if self.settings.plot:
+            outputs += [("wrinkles.png", lambda tmp: wrinkles_plot(profiles, critical, closed, tmp)),
+                        ("amplitude.png", lambda tmp: amplitude_plot(self.rows, critical, tmp))]
+
+        def files():
+            for name, write in outputs:
+                path = self.outdir / name
+                writes.at(path, writes.replace_file, path, write)
+
+        try:
+            writes.on_rank0(self.comm, self.outdir, files)
+        except ResultWriteError as err:
+            self._record(err)
 
     def close(self) -> None:
         self._close_fields()

@@ -26,7 +26,7 @@ from petsc4py import PETSc
 from app import compat
 from app.onset.wrinkles import surface_profile, surface_shape
 from app.solvers import mumps
-from app.solvers.stability import RateOperator
+from app.solvers.stability import RateOperator, free_to_local
 
 TAU_FACTOR = 1e8  # the flux of a content change: tau = this x (elapsed time + ramp scale), see the docstring
 
@@ -124,8 +124,7 @@ class BranchSwitcher:
             op.matrix()
             A = op.A
             n_owned = compat.owned_size(p.W)
-            fixed = np.zeros(n_owned, dtype=bool)
-            fixed[compat.owned_bc_dofs(p.bcs, p.W)] = True
+            fixed = op.fixed()
             is_q = np.zeros(n_owned, dtype=bool)
             is_q[p.q_dofs[p.q_dofs < n_owned]] = True
             free_q = compat.owned_index_set(p.W, np.flatnonzero(is_q & ~fixed), p.comm)
@@ -148,14 +147,7 @@ class BranchSwitcher:
             ksp.setOperators(Kqq)
             ksp.solve(b, x)
             full = A.createVecRight()
-            full.set(0.0)
-            sub = full.getSubVector(free_q)
-            x.copy(sub)
-            full.restoreSubVector(free_q, sub)
-            f = compat.Function(p.W)
-            f.x.array[:n_owned] = full.array
-            f.x.scatter_forward()
-            out = f.x.array[p.q_dofs].copy()
+            out = free_to_local(x, free_q, full, p.W)[p.q_dofs]
             for obj in (z, r, Kqq, b, x, full, free_q):
                 obj.destroy()
             return out

@@ -16,7 +16,7 @@ import ufl
 from mpi4py import MPI
 
 from app import compat
-from app.onset.wrinkles import boundary_displacement
+from app.onset.wrinkles import boundary_displacement, surface_tangent
 
 
 @dataclass
@@ -62,9 +62,8 @@ def surface_contact(problem, array: np.ndarray) -> Limit | None:
         order = np.argsort(np.arctan2(rel[:, 1], rel[:, 0]))
         closed = True
     else:
-        centre = coords.mean(axis=0)
-        _, _, vt = np.linalg.svd(coords - centre, full_matrices=False)
-        order = np.argsort((coords - centre) @ vt[0])
+        centre, tangent = surface_tangent(coords)
+        order = np.argsort((coords - centre) @ tangent)
         closed = False
     x = (coords + disp)[order]
     pair = _segments_cross(x, closed)

@@ -117,11 +117,17 @@ def boundary_displacement(problem, array: np.ndarray, groups: list[str]):
     return np.concatenate([d[0] for d in data]), np.concatenate([d[1] for d in data])
 
 
-def along_profile(coords: np.ndarray, disp: np.ndarray):
-    """Position along an open, nearly straight surface, the displacement normal to it, and its length."""
+def surface_tangent(coords: np.ndarray):
+    """(centre, unit tangent) of an open, nearly straight surface's nodes: the principal direction, with a
+    sign independent of the node order (its largest component positive)."""
     centre = coords.mean(axis=0)
     _, _, vt = np.linalg.svd(coords - centre, full_matrices=False)
-    tangent = vt[0] if vt[0][np.argmax(np.abs(vt[0]))] > 0 else -vt[0]  # a sign independent of the node order
+    return centre, (vt[0] if vt[0][np.argmax(np.abs(vt[0]))] > 0 else -vt[0])
+
+
+def along_profile(coords: np.ndarray, disp: np.ndarray):
+    """Position along an open, nearly straight surface, the displacement normal to it, and its length."""
+    centre, tangent = surface_tangent(coords)
     normal = np.array([-tangent[1], tangent[0]])
     t = (coords - centre) @ tangent
     order = np.argsort(t)

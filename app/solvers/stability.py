@@ -104,13 +104,14 @@ class RateOperator:
         self.Kf = None
         self._full = self.A.createVecRight()
 
-    def _fixed(self) -> np.ndarray:
+    def fixed(self) -> np.ndarray:
+        """Owned dofs of W under a Dirichlet condition."""
         fixed = np.zeros(compat.owned_size(self.W), dtype=bool)
         fixed[compat.owned_bc_dofs(self.bcs, self.W)] = True
         return fixed
 
     def _free_local(self) -> np.ndarray:
-        return np.flatnonzero(~self._fixed())
+        return np.flatnonzero(~self.fixed())
 
     def _set_zero_increment(self) -> None:
         """Own coefficients at the converged state: (u, dQ) = (u_n, 0)."""
@@ -138,7 +139,7 @@ class RateOperator:
 
     def embed(self, x_free: PETSc.Vec) -> np.ndarray:
         """Free-dof vector -> local array (owned + ghost) of the full mixed space W."""
-        return _free_to_local(x_free, self.is_free, self._full, self.W)
+        return free_to_local(x_free, self.is_free, self._full, self.W)
 
     def destroy(self) -> None:
         for obj in (self.Kf, self.A, self.is_free, self._full):
@@ -156,7 +157,7 @@ class UndrainedOperator(RateOperator):
         is_u = np.zeros(compat.owned_size(self.W), dtype=bool)
         u = self.u_dofs[self.u_dofs < is_u.size]
         is_u[u] = True
-        return np.flatnonzero(is_u & ~self._fixed())
+        return np.flatnonzero(is_u & ~self.fixed())
 
 
 class DrainedOperator:
@@ -241,7 +242,7 @@ class DrainedOperator:
         """Free displacement vector -> local array of W (the mode's displacement; flux part zero)."""
         p = self.problem
         ud = compat.Function(self.Vd_u)
-        ud.x.array[:] = _free_to_local(x_free, self.is_free, self._full, self.Wd)[self.ud_dofs]
+        ud.x.array[:] = free_to_local(x_free, self.is_free, self._full, self.Wd)[self.ud_dofs]
         u = compat.Function(p.V_u)
         compat.interpolate(u, ud)
         out = np.zeros_like(p.state.x.array)
@@ -254,7 +255,7 @@ class DrainedOperator:
                 obj.destroy()
 
 
-def _free_to_local(x_free: PETSc.Vec, is_free: PETSc.IS, full: PETSc.Vec, space) -> np.ndarray:
+def free_to_local(x_free: PETSc.Vec, is_free: PETSc.IS, full: PETSc.Vec, space) -> np.ndarray:
     """A vector on the free dofs -> local array (owned + ghost) of ``space``, zero on the fixed dofs
     (``full``: a work vector of the space's global size)."""
     full.set(0.0)

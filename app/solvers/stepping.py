@@ -367,10 +367,8 @@ class TimeStepper:
 
     def _accept(self, dt: float, its: int, err: float) -> StepRecord:
         p = self.p
-        if self.minimizing:
-            u = p.state.x.array.copy()
-            u[p.u_dofs] = p.w.x.array[p.u_dofs]
-            self._check_limits(u, self.t + dt)
+        if self.minimizing:  # the checks read the displacement dofs only: w's are the step's new ones
+            self._check_limits(p.w.x.array, self.t + dt)
         influx = p.step_influx()
         u_old = p.state.x.array[p.u_dofs].copy()
         p.accept()
