@@ -116,6 +116,40 @@ def test_either_imperfection_sign_gives_the_same_amplitude(branch_runs):
     assert compared >= 5
 
 
+def test_branch_steps_end_at_the_newton_tolerance(monkeypatch, tmp_path):
+    """Near the minimizer the energy's roundoff hides the decrease and the line search shrinks the step
+    to nothing; such a step must not count as converged short of the tolerance: every accepted solve
+    ends with |R| <= max(rtol |R_0|, atol) (PETSc's test), or at the residual's roundoff floor."""
+    from app.solvers.minimizer import MinimizingNewton
+
+    seen = []
+    solve, converged = MinimizingNewton.solve, MinimizingNewton._converged
+
+    def first_norm(self, snes, it, norms):
+        if it == 0 and self._r0 is None:
+            self._r0 = norms[2]
+        return converged(self, snes, it, norms)
+
+    def recorded(self):
+        self._r0 = None
+        res = solve(self)
+        seen.append((res, self._r0, self.rtol, self.residual_scale))
+        return res
+
+    monkeypatch.setattr(MinimizingNewton, "_converged", first_norm)
+    monkeypatch.setattr(MinimizingNewton, "solve", recorded)
+    cfg = _compression()
+    outdir = tmp_path / f"r{MPI.COMM_WORLD.rank}"
+    s = simulate(cfg, outdir, MPI.COMM_SELF)
+    assert s["status"] == "buckled"
+    accepted = [x for x in seen if x[0].converged]
+    assert len(accepted) >= 10
+    atol = cfg["solver"]["atol"]
+    for res, r0, rtol, scale in accepted:
+        floor = 1e3 * np.finfo(float).eps * scale
+        assert res.residual_norm <= max(rtol * r0, atol, floor), (res, r0)
+
+
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run with a serial one")
 def test_distributed_branch_equals_serial(branch_runs, tmp_path):
     _, dist = branch_runs["plus"]
@@ -127,7 +161,9 @@ def test_distributed_branch_equals_serial(branch_runs, tmp_path):
     amp_s = np.array([float(r["amplitude_mm"]) for r in serial])
     big = amp_s > 1e-6
     assert big.sum() >= 10
-    assert np.max(np.abs(amp_d[big] - amp_s[big]) / amp_s[big]) < 1e-6
+    # Newton-level agreement: measured 7e-12 (3 runs); 5e-6 while a line search shrunk to roundoff near the
+    # minimizer counted as converged short of the tolerance (now finished with plain Newton: polish)
+    assert np.max(np.abs(amp_d[big] - amp_s[big]) / amp_s[big]) < 1e-8
     assert np.all(amp_d[~big] < 1e-6)
 
 

@@ -17,7 +17,8 @@ whatever stationary point is nearest, the unbuckled saddle included. This solver
   the solution are kept: :attr:`last` reports both.
 
 Near a minimizer energy differences fall below the roundoff of the assembled energy; a line search
-that then fails at a residual already below ``sqrt(rtol)`` times the problem's scale is finished with
+that then fails, or shrinks the step to roundoff (which the base test would accept as converged short of
+the tolerance), at a residual already below ``sqrt(rtol)`` times the problem's scale is finished with
 plain Newton steps (K is positive definite there), not reported as a failure.
 """
 
@@ -129,7 +130,12 @@ class MinimizingNewton(NewtonSolver):
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         self.last.energy_start = compat.assemble_scalar(self.energy_form, self.comm)
         res = super().solve()
-        if not res.converged and res.reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH:
+        reason = PETSc.SNES.ConvergedReason
+        if not res.converged and res.reason == reason.DIVERGED_LINE_SEARCH:
+            res = self._polish(res)
+        elif res.converged and res.reason == reason.CONVERGED_SNORM_RELATIVE and res.residual_norm > self._ttol:
+            # the roundoff-update rule fired on a step the line search had shrunk (the energy's roundoff
+            # hides the decrease near the minimizer): the iterate is short of the tolerance, finish it
             res = self._polish(res)
         if res.converged:
             self.last.energy_end = compat.assemble_scalar(self.energy_form, self.comm)
@@ -138,9 +144,10 @@ class MinimizingNewton(NewtonSolver):
         return res
 
     def _polish(self, failed: NewtonResult) -> NewtonResult:
-        """A line search that failed close to a minimizer (residual below sqrt(rtol) x the problem's scale,
-        K without negative pivots): finish with plain Newton steps from the last iterate, converged by
-        the same test (:meth:`NewtonSolver._converged`)."""
+        """A line search that failed or stalled close to a minimizer (residual below sqrt(rtol) x the
+        problem's scale, K without negative pivots): finish with plain Newton steps from the last iterate,
+        converged by the same test (:meth:`NewtonSolver._converged`), whose roundoff-update rule means
+        what it says only for full Newton steps. Otherwise ``failed`` is returned as it is."""
         scale = self.residual_scale or 0.0
         if not (math.isfinite(failed.residual_norm) and failed.residual_norm <= math.sqrt(self.rtol) * scale
                 and self.last.negatives == 0):
