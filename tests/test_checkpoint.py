@@ -235,7 +235,21 @@ def test_resume_continues_like_an_uninterrupted_run(extra, stop, shared_tmp, com
     same_summary(full, resumed, tol, counters=tol == 1e-10)  # iteration counters: see above
     if extra is AFTER_CROSSINGS:  # the first crossing's mode files, written before the checkpoint, are kept
         _same_mode_surface(shared_tmp / "full" / "mode_surface.csv", part / "mode_surface.csv")
+    if extra is ON_BRANCH:  # profiles.npz covers the whole branch, the part before the stop from the checkpoint
+        _same_profiles(shared_tmp / "full" / "profiles.npz", part / "profiles.npz", tol)
     assert not (part / checkpoint.FILE).exists()  # the run ended normally: nothing left to resume
+
+
+def _same_profiles(ref, got, tol: float) -> None:
+    """Two profiles.npz files: the same steps (growth, time) and the same surface profiles, relative to the
+    largest profile value."""
+    with np.load(ref) as a, np.load(got) as b:
+        assert set(a.files) == set(b.files) == {"growth_mm", "time", "position", "profile"}
+        assert a["time"].size >= 20 and a["profile"].shape == b["profile"].shape
+        assert np.abs(a["time"] - b["time"]).max() <= 1e-12 * a["time"].max()
+        for name in ("growth_mm", "position", "profile"):
+            scale = np.abs(a[name]).max()
+            assert np.abs(a[name] - b[name]).max() <= tol * scale, name
 
 
 def _same_mode_surface(ref, got) -> None:

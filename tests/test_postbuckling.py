@@ -9,9 +9,12 @@ eps_c the run's own onset strain. Measured: see docs/postbuckling.md.
 
 import csv
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import read_json, write_on_rank0
 from mpi4py import MPI
 
 from app import config
@@ -22,6 +25,10 @@ from app.schema import ConfigError
 from app.workflows.run import simulate
 
 FILM = 0.01
+# the paper's bilayer on a coarse mesh followed past its onset (g_c 7.69 um, 14% above the converged value;
+# this mesh reaches 3 g_c, finer ones end in a fold at 1.3-1.9 g_c: docs/postbuckling.md)
+COARSE_BRANCH = ["stability.after_onset=branch", "stability.error_estimate=false", "mesh.element_size=0.02",
+                 "mesh.film_layers=2", "time.end=1.6", "output.fields=false", "output.plot=false"]
 
 
 def _compression(**overrides) -> dict:
@@ -53,8 +60,6 @@ def branch_runs(tmp_path_factory):
     """The compression case with the branch followed (both imperfection signs) and on the fundamental path."""
     comm = MPI.COMM_WORLD
     base = tmp_path_factory.mktemp("pb") if comm.rank == 0 else None
-    from pathlib import Path
-
     base = Path(comm.bcast(str(base) if base else None))
     out = {}
     for name, over in (("plus", {}), ("minus", {"stability.imperfection": -0.01}),
@@ -165,6 +170,112 @@ def test_distributed_branch_equals_serial(branch_runs, tmp_path):
     # minimizer counted as converged short of the tolerance (now finished with plain Newton: polish)
     assert np.max(np.abs(amp_d[big] - amp_s[big]) / amp_s[big]) < 1e-8
     assert np.all(amp_d[~big] < 1e-6)
+
+
+def test_paper_bilayer_is_followed_until_the_model_ends(tmp_path):
+    """configs/bilayer.toml on a coarse mesh with after_onset = "branch": past its onset the run reaches twice
+    g_c or ends with status contact / inverted naming when and where, never a solver failure, with everything
+    kept. On the branch the surface keeps the wrinkle count of the critical eigenmode (computed from the
+    eigenvector, independently of the branch's surface profiles) and the amplitude grows, up to the next
+    crossing (docs/postbuckling.md: period doubling, then a fold)."""
+    repo = Path(__file__).resolve().parents[1]
+    cfg = config.load(repo / "configs" / "bilayer.toml", COARSE_BRANCH)
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    s = simulate(cfg, base / "out", comm, progress=False)
+    rows = _rows(base / "out")
+    gc = s["critical"]["growth_mm"]
+    assert s["status"] in ("buckled", "contact", "inverted"), s["message"]
+    if s["status"] == "buckled":
+        assert float(rows[-1]["growth_mm"]) >= 2 * gc
+    else:  # the message says when and where; the last row is the last accepted state
+        assert re.search(r"near the reference point \(.+\) mm .*t = [0-9.]+ s", s["message"]), s["message"]
+        assert s["final"]["growth_mm"] == pytest.approx(float(rows[-1]["growth_mm"]))
+    switches = s["postbuckling"]["switches"]
+    crossings = s["postbuckling"]["branch_crossings"]
+    first_switch = switches[0]["time"]
+    end = crossings[0]["bracket"][0] if crossings else float("inf")
+    branch = [r for r in rows if first_switch < float(r["time"]) <= end]
+    assert len(branch) >= 10
+    amplitude = [float(r["amplitude_mm"]) for r in branch]
+    assert all(b > a for a, b in zip(amplitude, amplitude[1:]))
+    assert amplitude[-1] > cfg["geometry"]["film_thickness"] / 2  # grown well past the imperfection
+    assert {float(r["wrinkle_count"]) for r in branch} == {switches[0]["wrinkle_count"]}
+    with np.load(base / "out" / "profiles.npz") as z:  # one profile per branch step, the last one the last row
+        assert z["time"].size == sum(float(r["time"]) > first_switch - 1e-12 for r in rows)
+        assert z["time"][-1] == pytest.approx(float(rows[-1]["time"]))
+
+
+def _fold_after(monkeypatch, accepted_calls: int | None = None, failing_attempts: int = 0):
+    """Make the branch reach a fold: the contact check reports one at its ``accepted_calls``-th call on an
+    accepted state, or the ``failing_attempts`` attempts of the first branch step after the switch fail
+    with iterates that fold. Returns the log of what was reported."""
+    from app.onset.contact import Limit, ModelLimits
+    from app.solvers import stepping
+    from app.solvers.newton import NewtonResult
+
+    seen = {"checks": 0, "failing": failing_attempts, "reported": []}
+    attempt = stepping.TimeStepper.attempt
+
+    def failing_attempt(self, dt):
+        res, err = attempt(self, dt)
+        if self.minimizing and seen["failing"] > 0 and self.step > 0:
+            seen["failing"] -= 1
+            seen["in_failure"] = True
+            return NewtonResult(False, res.iterations, -6, 1.0), float("nan")
+        seen["in_failure"] = False
+        return res, err
+
+    def check(self, array):
+        seen["checks"] += 1
+        if seen.get("in_failure") or (accepted_calls is not None and seen["checks"] == accepted_calls):
+            limit = Limit("contact", (0.0625, 0.5), "the surface folds onto itself near the reference point "
+                                                      "(0.0625, 0.5) mm")
+            seen["reported"].append(limit)
+            return limit
+        return None
+
+    monkeypatch.setattr(stepping.TimeStepper, "attempt", failing_attempt)
+    monkeypatch.setattr(ModelLimits, "__call__", check)
+    return seen
+
+
+def test_a_fold_ends_the_run_with_its_status_and_everything_kept(monkeypatch, tmp_path):
+    """An accepted branch state that folds: status contact (the CLI's exit code 0), the message says when
+    and where, history.csv holds every accepted state before it, profiles.npz the branch so far."""
+    from app.cli import main
+
+    seen = _fold_after(monkeypatch, accepted_calls=6)
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    cfg_path = write_on_rank0(base / "case.toml", config.dumps(_compression()))
+    assert main(["run", str(cfg_path), "-o", str(base / "out"), "-q"]) == 0
+    s = read_json(base / "out" / "summary.json")
+    assert s["status"] == "contact" and len(seen["reported"]) == 1
+    assert "near the reference point (0.0625, 0.5) mm at t = " in s["message"]
+    rows = _rows(base / "out")
+    assert len(rows) == s["steps"] + 1 and s["final"]["time"] == pytest.approx(float(rows[-1]["time"]))
+    switch = s["postbuckling"]["switches"][0]["time"]
+    with np.load(base / "out" / "profiles.npz") as z:
+        assert z["time"].size == sum(float(r["time"]) > switch - 1e-12 for r in rows)
+
+
+@pytest.mark.parametrize("failing, status", [(1, "buckled"), (2, "contact")])
+def test_a_failed_attempt_that_folds_is_cut_back_before_it_ends_the_run(failing, status, monkeypatch, tmp_path):
+    """One failed attempt whose last iterate folds may be an overshoot: the step is cut back and the run goes
+    on. Two (the retry folds as well): status contact, the message naming the iterates and the last
+    accepted time."""
+    seen = _fold_after(monkeypatch, failing_attempts=failing)
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    s = simulate(_compression(), base / "out", comm, progress=False)
+    assert s["status"] == status and len(seen["reported"]) == failing
+    assert s["failed_solves"] >= failing
+    if status == "contact":
+        last = float(_rows(base / "out")[-1]["time"])
+        assert f"in the Newton iterates of two attempts of the step after t = {last:.6g} s" in s["message"]
+    else:
+        assert s["final"]["time"] == pytest.approx(1.0)
 
 
 def test_segments_cross_finds_a_fold_and_not_a_steep_wave():

@@ -12,7 +12,10 @@ stopped (docs/reliability.md, "Checkpoint and restart"):
 - ``u_key``, ``x``: each mesh node's index in the mesh's input (the gmsh model) and its coordinates;
 - ``q_key``: each facet as the pair of its vertices' input indices (lo * 2^31 + hi);
 - ``a0``, ``a1``, ...: the state arrays (u and the accumulated flux Q_n of each remembered state, the
-  predictor's rate_u and dQ_prev), in key order, each stored once.
+  predictor's rate_u and dQ_prev), in key order, each stored once;
+- on a followed branch, ``profile_growth``, ``profile_time``, ``profile_position``, ``profile_value``: the
+  surface profile of every branch step so far (profiles.npz of the continued run starts with them; they
+  are gathered surface arrays sorted along the surface, the same on any number of ranks).
 
 The arrays are stored independently of the mesh partition: displacement dofs keyed by the input node
 index of their vertex, the RTCF flux dofs (one per facet) by their facet's vertex pair. A flux dof's
@@ -40,6 +43,9 @@ from app import compat, config
 FILE = "checkpoint.npz"
 FORMAT = 1
 KEY_BASE = 1 << 31  # a facet's key: lo * KEY_BASE + hi (input node indices < 2^31)
+# the branch's surface profiles (app.onset.wrinkles.SurfaceProfiles.arrays) and their members in the file
+PROFILE_MEMBERS = {"growth_mm": "profile_growth", "time": "profile_time", "position": "profile_position",
+                   "profile": "profile_value"}
 
 # Keys a resumed run may change: they decide when a run ends or what it writes, never a row before the
 # checkpoint or the continuation after it (time.end: only above the checkpoint's time, see check()).
@@ -288,10 +294,10 @@ class _Sink:
                 self.error = self.error or err
 
 
-def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list) -> float:
+def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, profiles=None) -> float:
     """Write the checkpoint of the run's current state (collective; between steps). Returns its size in
     bytes on rank 0 (0 elsewhere); an OSError on every rank if rank 0 could not write it (the previous
-    checkpoint is then left as it was)."""
+    checkpoint is then left as it was). ``profiles``: the branch's :class:`SurfaceProfiles` so far."""
     comm = layout.comm
     rank0 = comm.rank == 0
     final = Path(outdir) / FILE
@@ -337,9 +343,13 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list) ->
     error = None
     if rank0:
         try:  # nothing rank 0 does alone may raise: the other ranks wait for its verdict below
+            if profiles:
+                for name, a in profiles.arrays().items():
+                    sink.put(PROFILE_MEMBERS[name], a)
             meta = {"format": FORMAT, "result_hash": result_hash(cfg), "inputs": input_files(cfg), "config": cfg,
                     "ranks": comm.size, "t": stepper.t, "step": stepper.step, "snapshots": snap_meta,
-                    "current": current, "stepper": stepper.counters(), "tracker": tracker_meta, "rows": rows}
+                    "current": current, "stepper": stepper.counters(), "tracker": tracker_meta, "rows": rows,
+                    "profiles_closed": bool(profiles.closed) if profiles else False}
             sink.put("meta", np.frombuffer(json.dumps(meta, default=_json_default).encode(), dtype=np.uint8))
         except (TypeError, ValueError) as err:
             sink.error = sink.error or err
@@ -388,10 +398,19 @@ def remove(outdir, comm) -> None:
 
 @dataclass
 class Resume:
-    """A checked checkpoint: its path and its meta (on every rank)."""
+    """A checked checkpoint: its path, its meta and the branch's surface profiles so far (on every rank)."""
 
     path: Path
     meta: dict
+    profile_arrays: dict | None = None  # PROFILE_MEMBERS' keys -> arrays; None before a branch
+
+    def profiles(self):
+        """The followed branch's :class:`~app.onset.wrinkles.SurfaceProfiles` up to the checkpoint."""
+        from app.onset.wrinkles import SurfaceProfiles
+
+        if not self.profile_arrays:
+            return SurfaceProfiles()
+        return SurfaceProfiles.from_arrays(self.profile_arrays, self.meta.get("profiles_closed", False))
 
     @property
     def rows(self) -> list:
@@ -402,8 +421,9 @@ class Resume:
         return len((self.meta["tracker"] or {}).get("crossings", ()))
 
 
-def _read(path: Path, cfg: dict) -> dict:
-    """Rank 0: the meta of a checkpoint file after reading every member (a corrupt file fails here)."""
+def _read(path: Path, cfg: dict) -> tuple[dict, dict | None]:
+    """Rank 0: the meta of a checkpoint file and its surface profiles (None if it has none), after
+    reading every member (a corrupt file fails here)."""
     where = f"--resume '{path.parent}'"
     if not path.parent.is_dir():
         raise CheckpointError(f"{where}: no such directory")
@@ -426,6 +446,13 @@ def _read(path: Path, cfg: dict) -> dict:
         for key in ("result_hash", "inputs", "t", "step", "current", "stepper", "tracker", "rows"):
             meta[key]  # noqa: B018 - every key must be there
         float(meta["config"]["time"]["end"])
+        profiles = None
+        if PROFILE_MEMBERS["time"] in arrays:
+            profiles = {name: arrays[member] for name, member in PROFILE_MEMBERS.items()}
+            steps = profiles["time"].shape
+            if (profiles["growth_mm"].shape != steps or profiles["position"].ndim != 2
+                    or profiles["position"].shape[0] != steps[0] or profiles["profile"].shape != profiles["position"].shape):
+                raise ValueError("the surface profiles' arrays do not match")
     except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile) as err:
         reason = f"{type(err).__name__}: {err}".replace("\n", " ")
         raise CheckpointError(f"{where}: the checkpoint {FILE} is unreadable ({reason[:200]})") from None
@@ -444,7 +471,7 @@ def _read(path: Path, cfg: dict) -> dict:
                                   f"time.end = {end:g} needs a new run")
         if end <= t * (1 + 1e-12):
             raise CheckpointError(f"{where}: time.end = {end:g} is not after the checkpoint's time t = {t:.6g} s")
-    return meta
+    return meta, profiles
 
 
 def check(outdir, cfg: dict, comm) -> Resume:
@@ -460,7 +487,7 @@ def check(outdir, cfg: dict, comm) -> Resume:
     result = comm.bcast(result, root=0)
     if isinstance(result, str):
         raise CheckpointError(result)
-    return Resume(path, result)
+    return Resume(path, *result)
 
 
 def restore(resume: Resume, problem, stepper, tracker) -> DofLayout:
@@ -532,13 +559,13 @@ class Checkpoints:
     def due(self, step: int) -> bool:
         return bool(self.every) and step % self.every == 0 and step != self.last_step
 
-    def write(self, problem, stepper, tracker, rows) -> None:
+    def write(self, problem, stepper, tracker, rows, profiles=None) -> None:
         if not self.every or stepper.step == self.last_step:
             return
         if self.layout is None:
             self.layout = DofLayout(problem)
         try:
-            size = write(self.outdir, self.cfg, self.layout, stepper, tracker, rows)
+            size = write(self.outdir, self.cfg, self.layout, stepper, tracker, rows, profiles)
         except OSError as err:  # the run goes on; the previous checkpoint stays
             self.log(f"hydrobuckle: warning: {err}")
             return

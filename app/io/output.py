@@ -304,24 +304,21 @@ class ResultWriter:
         except ResultWriteError as err:
             self._record(err)
 
-    def plot_branch(self, profiles: list, critical: dict | None, closed: bool) -> None:
+    def plot_branch(self, profiles, critical: dict | None) -> None:
         """After a followed branch: the surface profiles themselves, profiles.npz (growth, time, position and
-        profile of every step on the branch), and wrinkles.png and amplitude.png if plots are written
-        (collective, like :meth:`plot_history`)."""
+        profile of every step on the branch; :class:`app.onset.wrinkles.SurfaceProfiles`), and wrinkles.png
+        and amplitude.png if plots are written (collective, like :meth:`plot_history`)."""
         if not profiles:
             return
         from app.io.plots import amplitude_plot, wrinkles_plot
 
-        arrays = {"growth_mm": [p[0] for p in profiles], "time": [p[1] for p in profiles],
-                  "position": [p[2] for p in profiles], "profile": [p[3] for p in profiles]}
-
         def save_npz(tmp):
             with open(tmp, "wb") as f:
-                np.savez_compressed(f, **{k: np.array(v) for k, v in arrays.items()})
+                np.savez_compressed(f, **profiles.arrays())
 
         outputs = [("profiles.npz", save_npz)]
         if self.settings.plot:
-            outputs += [("wrinkles.png", lambda tmp: wrinkles_plot(profiles, critical, closed, tmp)),
+            outputs += [("wrinkles.png", lambda tmp: wrinkles_plot(profiles.tuples(), critical, profiles.closed, tmp)),
                         ("amplitude.png", lambda tmp: amplitude_plot(self.rows, critical, tmp))]
 
         def files():

@@ -106,9 +106,11 @@ class BranchSwitcher:
         st.inflow += inflow
         st.follow_minimizers()
         relaxed = st.relax()  # without diffusion: settle onto the branch at the onset's load
-        rec = Switch(st.t, p.growth(), crossing.wrinkle_count, abs(self.imperfection) * self.length, with_flux, inflow)
+        # the count of the mode added (the first eigenpair's), not the crossing's N_c (the minimum of the band)
+        count = crossing.first_mode_wrinkle_count
+        rec = Switch(st.t, p.growth(), count, abs(self.imperfection) * self.length, with_flux, inflow)
         self.switches.append(rec)
-        self.log(f"  branch switch at t = {st.t:.6f} s: mode (N = {crossing.wrinkle_count:g}) added with surface "
+        self.log(f"  branch switch at t = {st.t:.6f} s: mode (N = {count:g}) added with surface "
                  f"amplitude {1e3 * rec.imperfection_mm:.4g} um" + (" (with its fluid content)" if with_flux else "")
                  + "; following the buckled branch")
         return rec

@@ -12,6 +12,7 @@ scan tolerates end effects and noise that shift or blur a discrete spectrum.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -205,3 +206,43 @@ def surface_shape(problem, array: np.ndarray) -> tuple[float, float]:
     if closed:
         return amplitude, float(circumferential_wavenumber(pos, prof, weights))
     return amplitude, wrinkle_count(pos, prof, float(pos.max() - pos.min()))
+
+
+@dataclass
+class SurfaceProfiles:
+    """The surface profile (:func:`surface_profile`) of every state on a followed branch, in step order:
+    what profiles.npz and wrinkles.png show, kept in checkpoints so that a resumed run's files cover the
+    whole branch. The arrays are the same on every rank."""
+
+    growth_mm: list = field(default_factory=list)
+    time: list = field(default_factory=list)
+    position: list = field(default_factory=list)
+    profile: list = field(default_factory=list)
+    closed: bool = False
+
+    NAMES = ("growth_mm", "time", "position", "profile")
+
+    def add(self, growth_mm: float, time: float, position: np.ndarray, profile: np.ndarray, closed: bool) -> None:
+        self.growth_mm.append(float(growth_mm))
+        self.time.append(float(time))
+        self.position.append(np.asarray(position, float))
+        self.profile.append(np.asarray(profile, float))
+        self.closed = bool(closed)
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    def tuples(self) -> list[tuple]:
+        """(growth_mm, time, position, profile) per state."""
+        return list(zip(self.growth_mm, self.time, self.position, self.profile))
+
+    def arrays(self) -> dict:
+        """One array per name: growth_mm and time (steps,), position and profile (steps, surface nodes)."""
+        return {"growth_mm": np.array(self.growth_mm, float), "time": np.array(self.time, float),
+                "position": np.stack(self.position), "profile": np.stack(self.profile)}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict, closed: bool) -> SurfaceProfiles:
+        return cls([float(g) for g in arrays["growth_mm"]], [float(t) for t in arrays["time"]],
+                   [np.array(p, float) for p in arrays["position"]],
+                   [np.array(p, float) for p in arrays["profile"]], bool(closed))

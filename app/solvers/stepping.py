@@ -60,9 +60,14 @@ class ModelLimit(StepFailure):
     """The branch reached a state the model cannot represent (:mod:`app.onset.contact`): the run ends with
     the limit's status ("contact" or "inverted")."""
 
-    def __init__(self, limit, t: float):
+    def __init__(self, limit, t: float, accepted: float | None = None):
+        """``t``: the state's time; ``accepted``: for the iterates of a step that failed, the time of the last
+        accepted state (which passed the checks)."""
         self.limit, self.t = limit, t
-        super().__init__(f"{limit.detail} at t = {t:.6g} s: the model has no contact and no inverted elements, "
+        when = (f"at t = {t:.6g} s" if accepted is None else
+                f"in the Newton iterates of two attempts of the step after t = {accepted:.6g} s (the last one to "
+                f"t = {t:.6g} s; the accepted state at {accepted:.6g} s passed the checks)")
+        super().__init__(f"{limit.detail} {when}: the model has no contact and no inverted elements, "
                          f"the branch cannot be followed further")
 
 
@@ -276,21 +281,31 @@ class TimeStepper:
         control = self.control
         dt = control.first_try(self.dt_next)
         last_reason, diagnosed, failures = None, False, 0
+        folded = None  # on the branch: the limit a failed attempt's last iterate reached
         while True:
             dt = self._clip(dt, until)
             res, err = self.attempt(dt)
             if not res.converged:
                 self.failed_solves += 1
                 failures += 1
-                if self.minimizing:
-                    self._check_limits(self.p.w.x.array, self.t + dt)
+                limit = self._limit_of(self.p.w.x.array) if self.minimizing else None
+                if limit is not None:
+                    # one iterate that folds or inverts may be an overshoot a shorter step avoids; a second
+                    # attempt's as well: the branch itself runs into the limit
+                    if folded is not None:
+                        raise ModelLimit(limit, self.t + dt, accepted=self.t)
+                    folded = limit
                 if res.reason == last_reason and not diagnosed:
                     diagnosed = True
                     self._diagnose(dt, res.reason, failures)
                 last_reason = res.reason
                 new_dt = control.cut_back(dt)
                 self.log(f"  Newton did not converge (reason {res.reason}) at t = {self.t + dt:.6g} s, "
-                         f"dt = {dt:.3g} s: cutting back to {new_dt:.3g} s")
+                         f"dt = {dt:.3g} s: cutting back to {new_dt:.3g} s"
+                         + (f" (its last iterate: {limit.status} near ({limit.where[0]:.4g}, {limit.where[1]:.4g}) mm)"
+                            if limit is not None else ""))
+                if new_dt < control.dt_min and folded is not None:
+                    raise ModelLimit(folded, self.t + dt, accepted=self.t)
                 if new_dt < control.dt_min:
                     raise StepFailure(f"Newton failed to converge at t = {self.t:.6g} s even with "
                                       f"dt = {dt:.3g} s (time.dt_min = {control.dt_min:g} s); "
@@ -304,12 +319,16 @@ class TimeStepper:
             break
         return self._accept(dt, res.iterations, err)
 
-    def _check_limits(self, array: np.ndarray, t: float) -> None:
-        """On the branch: raise :class:`ModelLimit` if ``array`` (a state or a failed step's last iterate)
-        has an inverted cell or a self-intersecting surface."""
+    def _limit_of(self, array: np.ndarray):
+        """On the branch: the :class:`app.onset.contact.Limit` ``array`` (a state or a failed step's last
+        iterate) reaches, an inverted cell or a self-intersecting surface, else None."""
         if not np.all(np.isfinite(array[self.p.u_dofs])):
-            return
-        limit = self.limits(array)
+            return None
+        return self.limits(array)
+
+    def _check_limits(self, array: np.ndarray, t: float) -> None:
+        """Raise :class:`ModelLimit` if the accepted state ``array`` reaches a limit."""
+        limit = self._limit_of(array)
         if limit is not None:
             raise ModelLimit(limit, t)
 

@@ -18,7 +18,7 @@ from app.model.problem import Problem
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
 from app.onset.branching import reference_length
-from app.onset.wrinkles import surface_profile
+from app.onset.wrinkles import SurfaceProfiles, surface_profile
 from app.solvers.stepping import ModelLimit, StepFailure, StepRecord, TimeSettings, TimeStepper
 
 ASSUMPTIONS = (
@@ -113,14 +113,14 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         writer.write_fields(0.0)
         stepper.at_equilibrium(first)
     status, message = "completed", ""
-    profiles, closed = [], False
+    profiles = resume.profiles() if resume else SurfaceProfiles()  # the branch's, for profiles.npz/wrinkles.png
     try:
         while not stepper.done():
             if writer.error is not None:  # agreed on every rank
                 status, message = "failed", str(writer.error)
                 log.info(f"hydrobuckle: {message}; stopping after {stepper.step} steps")
                 with timing.timed("output"):
-                    checkpoints.write(problem, stepper, tracker, writer.rows)
+                    checkpoints.write(problem, stepper, tracker, writer.rows, profiles)
                 break
             sig = watch.requested()  # collective: every rank leaves after the same step
             if sig or (stop_after is not None and stepper.step >= stop_after):
@@ -129,7 +129,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
                 message = f"interrupted by {how} at t = {writer.rows[-1]['time']:.6g} s after {stepper.step} steps"
                 log.info(f"hydrobuckle: {message}")
                 with timing.timed("output"):
-                    checkpoints.write(problem, stepper, tracker, writer.rows)
+                    checkpoints.write(problem, stepper, tracker, writer.rows, profiles)
                 break
             rec = stepper.advance()
             writer.write_fields(rec.time, rec.step)
@@ -140,7 +140,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
                 break
             if stepper.minimizing:  # on a followed branch: the surface profile of every state (wrinkles.png)
                 pos, prof, _, closed = surface_profile(problem, problem.state.x.array)
-                profiles.append((problem.growth(), stepper.t, pos, prof))
+                profiles.add(problem.growth(), stepper.t, pos, prof, closed)
             if stepper.at_equilibrium(rec):
                 status = "equilibrium"
                 message = (f"equilibrium at t = {rec.time:.6g} s: relative fluid uptake rate {stepper.uptake_rate:.3g} "
@@ -149,7 +149,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
                 break
             if checkpoints.due(rec.step):
                 with timing.timed("output"):
-                    checkpoints.write(problem, stepper, tracker, writer.rows)
+                    checkpoints.write(problem, stepper, tracker, writer.rows, profiles)
     except ModelLimit as err:
         status, message = err.limit.status, str(err)
         log.info(f"hydrobuckle: {message}")
@@ -168,7 +168,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     tracker.destroy()
     if status != "interrupted":  # under mpirun the ranks have 1 s after a SIGTERM (docs/reliability.md)
         writer.plot_history(summary.get("critical"))
-        writer.plot_branch(profiles, summary.get("critical"), closed)
+        writer.plot_branch(profiles, summary.get("critical"))
     last = summary["final"]
     log.info(f"hydrobuckle: {summary['status']} after {stepper.step} steps, t = {last['time']:.5g} s, "
              f"growth = {1e3 * last['growth_mm']:.4f} um, wall {summary['wall_time_s']:.1f} s -> {outdir}")
