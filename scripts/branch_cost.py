@@ -13,15 +13,22 @@ import sys
 import time
 
 
+SETTLING = 3  # steps after a switch that still leave the saddle (reported apart)
+
+
 def main() -> int:
-    last, pre, post, switched = None, [], [], False
+    last, pre, post, settled, since = None, [], [], [], None
     for line in sys.stdin:
         now = time.perf_counter()
         if "branch switch" in line:
-            switched, last = True, None
+            since, last = 0, None
         if line.startswith("step"):
             if last is not None:
-                (post if switched else pre).append(now - last)
+                (post if since is not None else pre).append(now - last)
+                if since is not None and since >= SETTLING:
+                    settled.append(now - last)
+            if since is not None:
+                since += 1
             last = now
         elif any(k in line for k in ("bisection", "crossing", "lost positive")):
             last = None
@@ -32,6 +39,10 @@ def main() -> int:
     print(f"pre-onset steps {len(pre)}: median {mp:.3f} s, mean {statistics.mean(pre):.3f} s; "
           f"branch steps {len(post)}: median {mq:.3f} s, mean {statistics.mean(post):.3f} s; "
           f"ratio of medians {mq / mp:.2f}, of means {statistics.mean(post) / statistics.mean(pre):.2f}")
+    if settled:
+        print(f"branch steps {SETTLING}+ steps after a switch ({len(settled)}): mean {statistics.mean(settled):.3f} s, "
+              f"ratio of means {statistics.mean(settled) / statistics.mean(pre):.2f}; the slowest branch steps: "
+              + ", ".join(f"{t:.2f}" for t in sorted(post)[-5:]) + " s")
     return 0
 
 

@@ -163,7 +163,8 @@ class MinimizingNewton(NewtonSolver):
             self._ttol = failed.residual_norm * self.rtol
             for its in range(1, 6):
                 self._jacobian(snes, x, A, A)
-                if self.last.negatives:
+                if self.last.negatives:  # not a minimizer's neighbourhood after all: the result as it was
+                    its -= 1
                     break
                 ksp.solve(b, dx)
                 x.axpy(-1.0, dx)
@@ -174,6 +175,8 @@ class MinimizingNewton(NewtonSolver):
                     break
         finally:
             dx.destroy()
+        if its == 0:
+            return failed
         converged = reason > 0 and math.isfinite(fnorm)
         if converged:
             self._sync_solution(x)
