@@ -60,5 +60,6 @@ def add_error_estimate(summary: dict, cfg: dict, outdir, comm) -> None:
     est = companion_error_estimate(cfg, c["growth_um"], outdir, comm)
     c["discretization_error"] = est
     logging_setup.get().info(
-        f"hydrobuckle: g_c = {c['growth_um']:.4f} um +- {est['total_um']:.4f} um (estimated discretization "
-        f"error: time {est.get('time_um') or 0:.4f}, mesh {est.get('mesh_um') or 0:.4f})")
+        f"hydrobuckle: result: g_c = {c['growth_um']:.4f} um +- {est['total_um']:.4f} um, N_c = "
+        f"{c['wrinkle_count']:g} (estimated discretization error from the coarsened companion runs logged "
+        f"above: time {est.get('time_um') or 0:.4f}, mesh {est.get('mesh_um') or 0:.4f})")
