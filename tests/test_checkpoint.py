@@ -223,8 +223,9 @@ def test_resume_continues_like_an_uninterrupted_run(extra, stop, shared_tmp, com
     tol = 1e-10
     if extra is ON_BRANCH and comm.size > 1:
         # on 2 ranks a resumed state equals the stopped one to ~1e-13, not bit for bit, and the minimizer's
-        # energy line search decides at roundoff (docs/postbuckling.md): the states agree to Newton's tolerance
-        # (up to 2.6e-8 measured), not always with the same iteration counts; the local error estimate, a
+        # energy line search decides at roundoff (docs/postbuckling.md): the states agree to Newton's tolerance,
+        # not always with the same iteration counts (two uninterrupted 2-rank runs differ in them too: the
+        # 2-rank factorization is not bitwise reproducible); the local error estimate, a
         # difference of nearly equal contents, amplifies that. Fixed steps (ON_BRANCH): with adaptive ones the
         # estimate would feed the differences back into the step sizes (1.7e-5 apart after 100 steps)
         for r in ref + got:
