@@ -220,8 +220,6 @@ class SurfaceProfiles:
     profile: list = field(default_factory=list)
     closed: bool = False
 
-    NAMES = ("growth_mm", "time", "position", "profile")
-
     def add(self, growth_mm: float, time: float, position: np.ndarray, profile: np.ndarray, closed: bool) -> None:
         self.growth_mm.append(float(growth_mm))
         self.time.append(float(time))

@@ -304,9 +304,9 @@ class TimeStepper:
                          f"dt = {dt:.3g} s: cutting back to {new_dt:.3g} s"
                          + (f" (its last iterate: {limit.status} near ({limit.where[0]:.4g}, {limit.where[1]:.4g}) mm)"
                             if limit is not None else ""))
-                if new_dt < control.dt_min and folded is not None:
-                    raise ModelLimit(folded, self.t + dt, accepted=self.t)
                 if new_dt < control.dt_min:
+                    if folded is not None:
+                        raise ModelLimit(folded, self.t + dt, accepted=self.t)
                     raise StepFailure(f"Newton failed to converge at t = {self.t:.6g} s even with "
                                       f"dt = {dt:.3g} s (time.dt_min = {control.dt_min:g} s); "
                                       f"last SNES reason {res.reason}")
