@@ -139,6 +139,16 @@ def _check_output(path, comm) -> None:
         raise config.ConfigError("", f"result directory '{path}' (-o/--output): {problem}")
 
 
+def _take_output(path, comm) -> None:
+    """The last pre-flight step of a command that writes a result directory: :func:`_check_output`, then
+    the directory is claimed for this job (:mod:`app.io.lock`; it is created then): refused if another
+    live job holds it, a directory around it or one inside it."""
+    from app.io import lock
+
+    _check_output(path, comm)
+    lock.claim(path, comm)
+
+
 def _output_problem(path: Path) -> str | None:
     import tempfile
 
@@ -229,8 +239,11 @@ def cmd_run(args) -> int:
                 raise config.ConfigError("", f"--resume '{args.resume}' continues in that directory: leave out "
                                          f"-o/--output '{args.output}'")
             outdir = Path(args.resume)
+            from app.io import lock
+
+            lock.claim(outdir, comm, "--resume")  # a live job's checkpoint is not to be read, nor its directory
             resume = checkpoint.check(outdir, cfg, comm)
-        _check_output(outdir, comm)
+        _take_output(outdir, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
@@ -263,7 +276,7 @@ def cmd_converge(args) -> int:
             _check_mesh_sizes([c for _, _, c in levels], [f"converge level {label}" for label, _, _ in levels])
         _check_geometry([cfg], comm)
         outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-converge")
-        _check_output(outdir, comm)
+        _take_output(outdir, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
@@ -331,7 +344,7 @@ def cmd_study(args) -> int:
         _check_mesh_sizes([c.cfg for c in cases], [f"case {c.label}" for c in cases])
         _check_ranks(args, comm)
         _check_geometry([c.cfg for c in cases], comm, [c.label for c in cases])
-        _check_output(outdir, comm)
+        _take_output(outdir, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
@@ -367,7 +380,7 @@ def cmd_sweep(args) -> int:
         _check_mesh_sizes([c.cfg for c in cases], [f"case {c.label}" for c in cases])
         _check_ranks(args, comm)
         _check_geometry([c.cfg for c in cases], comm, [c.label for c in cases])
-        _check_output(outdir, comm)
+        _take_output(outdir, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     except ValueError as err:
@@ -420,7 +433,7 @@ def cmd_bench(args) -> int:
         size_cfgs = [bench.size_config(name, args.set) for name in sizes]
         _check_mesh_sizes(size_cfgs, [f"bench size {name}" for name in sizes])
         _check_geometry(size_cfgs, comm)
-        _check_output(args.output, comm)
+        _take_output(args.output, comm)
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
@@ -521,7 +534,12 @@ def main(argv: list[str] | None = None) -> int:
     """The command line's exit code (``argv`` None: the process's own arguments, and the process is
     ended here if an HDF5 file could not be closed, see :func:`app.compat.end_process`)."""
     args = _parser().parse_args(argv)
-    code = COMMANDS[args.command](args)
+    from app.io import lock
+
+    try:
+        code = COMMANDS[args.command](args)
+    finally:
+        lock.release_all()
     from app import interrupt
 
     code = interrupt.exit_code() or code  # 130 / 143 after SIGINT / SIGTERM (status "interrupted")

@@ -26,6 +26,10 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
                                   "element-height ratio away from the film; 1 = uniform"),
         "film_grading": _key(float, 1.0, _in_closed(1.0, 4.0),
                              "film element-height ratio towards the permeable surface; 1 = uniform"),
+        "refinements": _key(int, 0, _in_closed(0, 4),
+                            "geometry.kind = 'msh' only: split every quadrilateral of the file into 4 this many "
+                            "times (gmsh's uniform refinement; physical groups kept, new nodes on the file's "
+                            "straight edges)"),
         "quadrature_degree": _key(int, 2, _in_closed(1, 8), "quadrature degree of the cell integrals"),
         "coupling_quadrature_degree": _key(int, 1, _in_closed(0, 8),
                                            "quadrature degree of the volumetric penalty term (0/1 = one point: "
@@ -371,6 +375,10 @@ def validate(cfg: dict) -> None:
         raise ConfigError(f"material.film.{stiffness}",
                           f"set either material.film.{stiffness} or material.film.modulus_ratio, not both "
                           "(use --set material.film.modulus_ratio=... alone, or remove it from the file)")
+    if cfg["mesh"]["refinements"] and not kind.uniform_refinement:
+        raise ConfigError("mesh.refinements", f"= {cfg['mesh']['refinements']} applies to geometry.kind = 'msh' "
+                          f"only; allowed for {kind.name!r}: 0 (refine it with mesh.element_size and "
+                          "mesh.film_layers)")
     kind.validate(cfg)
     if kind.named_materials:
         _validate_material_layers(cfg, sch)

@@ -128,6 +128,8 @@ class GeometryKind:
     provides: ClassVar[frozenset[str]] = frozenset()
     # cell groups map to named materials, so [material.layers.NAME] applies
     named_materials: ClassVar[bool] = False
+    # mesh.refinements (uniform splitting of every cell) applies; other kinds refine by mesh.element_size
+    uniform_refinement: ClassVar[bool] = False
 
     def defaults(self) -> dict:
         return {name: k.default for name, k in self.keys.items()}
@@ -142,6 +144,19 @@ class GeometryKind:
     def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
         """The tagged mesh and what it means; with ``msh_path`` also write the mesh as .msh."""
         raise NotImplementedError
+
+    def refined(self, cfg: dict, exponent: int, factor: float) -> tuple[float, dict]:
+        """The mesh of a refinement study's level: refined ``exponent`` times by ``factor`` (coarsened if
+        negative). Returns (the level's parameter, the config changes); ConfigError if there is no such
+        level. The built-in kinds divide mesh.element_size by the factor and multiply mesh.film_layers by
+        it, so element shapes are kept while h shrinks."""
+        mesh = cfg["mesh"]
+        value = mesh["element_size"] / factor ** exponent
+        layers = mesh["film_layers"] * factor ** exponent
+        if layers < 1 or abs(layers - round(layers)) > 1e-9:
+            raise ConfigError("mesh.film_layers", f"= {mesh['film_layers']} cannot be coarsened {-exponent} times "
+                              f"by {factor:g}; allowed: a multiple of {factor ** -exponent:g}")
+        return value, {"mesh.element_size": value, "mesh.film_layers": int(round(layers))}
 
     def estimate(self, cfg: dict) -> dict | None:
         """The mesh size from the keys alone, without meshing (:func:`structured_size`); None if unknown

@@ -29,6 +29,7 @@ class UserMsh(GeometryKind):
     exportable = False
     not_exportable_because = "already is a .msh file"
     named_materials = True
+    uniform_refinement = True
 
     def validate(self, cfg: dict) -> None:
         geo = cfg["geometry"]
@@ -63,7 +64,7 @@ class UserMsh(GeometryKind):
         geo = cfg["geometry"]
         from app.geometry.tagged import is_closed
 
-        tm = read(comm, geo["file"])
+        tm = read(comm, geo["file"], refinements=cfg["mesh"]["refinements"])
         _check_groups(geo, tm.cell_names, tm.facet_names)
         wrinkles = geo.get("wrinkles") or "auto"
         if wrinkles == "auto":
@@ -72,15 +73,41 @@ class UserMsh(GeometryKind):
         return GeometrySetup(tm, dict(geo["layers"]), dict(geo["boundaries"]), wrinkles=wrinkles)
 
 
-def read(comm, path: str | Path, rank: int = 0) -> TaggedMesh:
-    """The mesh of a .msh file, distributed; ConfigError (key ``geometry.file``) on every rank if the file
-    is missing, unreadable, has no 2D physical groups or cells other than quadrilaterals."""
-    from app.geometry.tagged import gmsh_session, to_dolfinx
+    def refined(self, cfg: dict, exponent: int, factor: float) -> tuple[float, dict]:
+        """A file has no element size to scale: level ``exponent`` splits every cell of the file
+        ``mesh.refinements + exponent`` times (a negative exponent undoes refinements the config asked
+        for). The parameter is the element size relative to the file's."""
+        if factor != 2:
+            raise ConfigError("mesh.refinements", f"a .msh mesh is refined by uniform splitting (factor 2); "
+                              f"a refinement factor of {factor:g} is not possible")
+        level = cfg["mesh"]["refinements"] + exponent
+        if level < 0:
+            raise ConfigError("mesh.refinements", f"= {cfg['mesh']['refinements']} cannot be coarsened "
+                              f"{-exponent} time(s): a .msh mesh is only refined (every cell split into 4); "
+                              f"allowed: mesh.refinements >= {-exponent}, or refine instead of coarsening")
+        if level > REFINEMENTS_MAX:
+            raise ConfigError("mesh.refinements", f"= {level} is out of range; allowed: 0..{REFINEMENTS_MAX}")
+        return 2.0 ** -level, {"mesh.refinements": level}
+
+
+REFINEMENTS_MAX = 4
+
+
+def read(comm, path: str | Path, rank: int = 0, refinements: int = 0) -> TaggedMesh:
+    """The mesh of a .msh file, split uniformly ``refinements`` times, distributed; ConfigError (key
+    ``geometry.file``) on every rank if the file is missing, unreadable, has no 2D physical groups or
+    cells other than quadrilaterals."""
+    from app.geometry.tagged import gmsh_session, on_gmsh_rank, to_dolfinx
+    from meshes import msh
 
     path = Path(path)
     with gmsh_session(comm, "user-msh", rank) as active:
         cells, facets = _merge(comm, path, rank, active)
-        return to_dolfinx(comm, rank, cells, facets, {"file": str(path)})
+        info = {"file": str(path), "refinements": int(refinements)}
+        if refinements:
+            info["file_cells"] = on_gmsh_rank(comm, rank, active, msh.refine, 0)
+            on_gmsh_rank(comm, rank, active, msh.refine, refinements)
+        return to_dolfinx(comm, rank, cells, facets, info)
 
 
 def physical_groups(comm, path: str | Path, rank: int = 0) -> tuple[dict[str, int], dict[str, int]]:

@@ -56,12 +56,13 @@ def reference_length(cfg: dict) -> float | None:
 
 
 def typical_cell_size(problem) -> float:
-    """sqrt(area / cells) of the mesh."""
+    """sqrt(area / cells) of the mesh as its file has it: a .msh mesh split by mesh.refinements keeps the
+    file's cell size, so the imperfection is the same on every level of a refinement study."""
     import ufl
 
     one = compat.Constant(problem.domain, compat.ScalarType(1.0))
     area = compat.assemble_scalar(compat.form(one * ufl.dx(domain=problem.domain)), problem.comm)
-    return float(np.sqrt(area / problem.cells()))
+    return float(np.sqrt(area / problem.cells())) * 2.0 ** problem.tm.info.get("refinements", 0)
 
 
 def oriented(problem, mode: np.ndarray) -> np.ndarray:

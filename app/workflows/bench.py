@@ -148,6 +148,8 @@ def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdi
     interrupted (SIGINT/SIGTERM here or in a launch); :class:`BenchFailed` if a launch fails."""
     from mpi4py import MPI
 
+    from app.io import lock
+
     out = {}
     for k in ranks:
         if interrupt.pending(MPI.COMM_SELF):
@@ -162,6 +164,7 @@ def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdi
         if os.getuid() == 0:
             env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
         env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+        env[lock.INHERITED] = lock.held_env()  # the launch writes into this bench's directory
         code = subprocess.run(cmd, env=env).returncode
         try:
             if interrupt.pending(MPI.COMM_SELF) or code in interrupt.EXIT_CODES.values():

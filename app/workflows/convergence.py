@@ -79,13 +79,10 @@ def refined_configs(cfg: dict, study: str, levels: int, time_factor: float, mesh
                 changes.update({"time.dt_initial": dt, "time.dt_min": min(cfg["time"]["dt_min"], dt),
                                 "time.dt_max": max(cfg["time"]["dt_max"], dt)})
         else:
-            value = changes["mesh.element_size"] = cfg["mesh"]["element_size"] / mesh_factor ** e
-            layers = cfg["mesh"]["film_layers"] * mesh_factor ** e
-            if layers < 1 or abs(layers - round(layers)) > 1e-9:
-                raise config.ConfigError("mesh.film_layers", f"= {cfg['mesh']['film_layers']} cannot be coarsened "
-                                         f"{k} times by {mesh_factor:g}; allowed: a multiple of "
-                                         f"{mesh_factor ** k:g}")
-            changes["mesh.film_layers"] = int(round(layers))
+            from app import geometry
+
+            value, more = geometry.kind_of(cfg).refined(cfg, e, mesh_factor)
+            changes.update(more)
         out.append((f"{study}{k}", value, variant(cfg, changes)))
     return out
 

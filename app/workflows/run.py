@@ -181,6 +181,14 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
             step(summary)
     except ResultWriteError as err:  # a companion run's file
         writer.error = writer.error or err
+    except Exception as err:  # noqa: BLE001 - the run's own answer is kept: summary.json says what failed
+        import traceback
+
+        what = f"{type(err).__name__}: {err}"
+        log.info(f"hydrobuckle: the step after the run failed ({what}); the run's result is kept, summary.json "
+                 "records the failure under 'after_run_error'")
+        log.debug(traceback.format_exc())
+        summary["after_run_error"] = what
     if writer.error is not None:
         summary.update(status="failed", message=str(writer.error))
     writer.summary(summary)
