@@ -189,6 +189,51 @@ def same_summary(ref: dict, got: dict, rel: float, counters: bool = True) -> Non
         assert all(close(x, y) for x, y in zip(a["bracket"], b["bracket"]))
         assert [m["wrinkle_count"] for m in a["modes"]] == [m["wrinkle_count"] for m in b["modes"]]
         assert all(close(x["eigenvalue"], y["eigenvalue"], True) for x, y in zip(a["modes"], b["modes"]))
+    _same_final(ref["final"], got["final"], rel)
+    _same_postbuckling(ref.get("postbuckling"), got.get("postbuckling"), rel, counters)
+
+
+def _same_final(a: dict, b: dict, rel: float) -> None:
+    assert a["wrinkle_count"] == b["wrinkle_count"]
+    for key in ("time", "growth_mm"):
+        assert _rel(a[key], b[key]) <= rel, (key, a[key], b[key])
+    # an unbuckled state's amplitude is roundoff: relative to the growth
+    assert abs(a["amplitude_mm"] - b["amplitude_mm"]) <= rel * max(abs(a["amplitude_mm"]), abs(a["growth_mm"]))
+
+
+SWITCH = ("time", "growth_mm", "wrinkle_count", "imperfection_mm", "with_flux")
+
+
+def _same_postbuckling(a: dict | None, b: dict | None, rel: float, counters: bool) -> None:
+    """The whole postbuckling block: settings, every switch (its inflow relative to the largest one's, an
+    inflow of a flux-free switch is roundoff), every crossing on the branch as a critical record, every
+    restabilization, and the minimizer's counters (with ``counters``)."""
+    assert (a is None) == (b is None)
+    if a is None:
+        return
+    assert set(a) == set(b)
+    for key in ("after_onset", "imperfection", "imperfection_mm"):
+        assert a[key] == b[key], key
+    assert len(a["switches"]) == len(b["switches"])
+    inflow = max([abs(x["inflow"]) for x in a["switches"]] + [1e-300])
+    for x, y in zip(a["switches"], b["switches"]):
+        for key in SWITCH:
+            same = x[key] == y[key] if isinstance(x[key], (bool, str)) else _rel(x[key], y[key]) <= rel
+            assert same, ("switch", key, x[key], y[key])
+        assert abs(x["inflow"] - y["inflow"]) <= rel * inflow + 1e-15, ("switch inflow", x["inflow"], y["inflow"])
+    assert len(a["branch_crossings"]) == len(b["branch_crossings"])
+    for x, y in zip(a["branch_crossings"], b["branch_crossings"]):
+        scale = max(abs(m["eigenvalue"]) for m in x["modes"])
+        for key in CRITICAL:
+            tol = rel * max(abs(x[key]), abs(y[key]), scale if key.startswith("lambda") else 0.0)
+            assert abs(x[key] - y[key]) <= tol, ("branch crossing", key, x[key], y[key])
+        assert all(abs(p - q) <= rel * abs(p) for p, q in zip(x["bracket"], y["bracket"]))
+        assert [m["wrinkle_count"] for m in x["modes"]] == [m["wrinkle_count"] for m in y["modes"]]
+    assert [r["negative_eigenvalues"] for r in a["restabilized"]] == [r["negative_eigenvalues"] for r in b["restabilized"]]
+    for x, y in zip(a["restabilized"], b["restabilized"]):
+        assert _rel(x["time"], y["time"]) <= rel and _rel(x["growth_mm"], y["growth_mm"]) <= rel
+    if counters:
+        assert a["minimizer"] == b["minimizer"]
 
 
 # --- child processes and what they write -------------------------------------------------------------

@@ -113,6 +113,8 @@ def test_run_reports_gc_with_its_discretization_error(shared_tmp):
     tcfg = config.load(out / "error-estimate" / "time" / "config.toml")
     mcfg = config.load(out / "error-estimate" / "mesh" / "config.toml")
     assert tcfg["time"]["tolerance"] == 4 * base_cfg["time"]["tolerance"]
+    for bound in ("dt_initial", "dt_max"):  # the step bounds coarsened with the steps (x2)
+        assert tcfg["time"][bound] == 2 * base_cfg["time"][bound]
     assert tcfg["mesh"] == base_cfg["mesh"]
     assert mcfg["mesh"]["element_size"] == 2 * base_cfg["mesh"]["element_size"]
     assert mcfg["mesh"]["film_layers"] * 2 == base_cfg["mesh"]["film_layers"]

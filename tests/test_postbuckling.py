@@ -78,7 +78,9 @@ def test_amplitude_follows_the_supercritical_law(branch_runs):
         ratio = float(r["applied_strain"]) / eps_c
         if 1.2 <= ratio <= 1.5:
             law = FILM * math.sqrt(ratio - 1)
-            assert float(r["amplitude_mm"]) == pytest.approx(law, rel=0.10), (ratio, r["amplitude_mm"], law)
+            # measured 0.983-0.987 of the law (1.3-1.7% below: finite strain and this mesh); a strip whose length
+            # is not the theoretical wavelength gives 7.7% (docs/postbuckling.md) and fails
+            assert float(r["amplitude_mm"]) == pytest.approx(law, rel=0.03), (ratio, r["amplitude_mm"], law)
             assert float(r["wrinkle_count"]) == 1.0  # one wavelength on the strip
             checked += 1
     assert checked >= 5
@@ -91,20 +93,43 @@ def test_amplitude_follows_the_supercritical_law(branch_runs):
     assert all(float(r["amplitude_mm"]) < 1e-9 * 0.3 and float(r["wrinkle_count"]) == 0 for r in before)
 
 
-def test_branch_energy_is_below_the_fundamental_path(branch_runs):
-    _, branch = branch_runs["plus"]
+def test_branch_energy_release_follows_the_supercritical_law(branch_runs):
+    """At the same applied strain eps past the onset eps_c the branch stores less energy than the flat
+    (fundamental) path by the supercritical release of film wrinkling: with the film's membrane strain locked
+    at eps_c on the branch (Chen & Hutchinson 2004; Huang, Hong & Suo 2005), per unit depth
+    dU = h L int_{eps_c}^{eps} (P(e) - P(eps_c)) de, P the film's undrained plane-strain compressive stress
+    (app.model.theory; with a linear P this is the familiar E_bar h L (eps - eps_c)^2 / 2). Measured: the
+    ratio is 1.032-1.034 (the linear-modulus form gives 1.11-1.13 and fails), constant to 0.2% over
+    eps/eps_c = 1.05-1.54, so dU grows as (eps - eps_c)^2."""
+    from scipy.integrate import quad
+
+    from app.model.theory import _undrained_pxx
+
+    s, branch = branch_runs["plus"]
     s_f, fund = branch_runs["fundamental"]
-    switch = branch_runs["plus"][0]["postbuckling"]["switches"][0]["time"]
+    cfg = s["config"]
+    film = layer_materials(cfg)["film"]
+    h, length = cfg["geometry"]["film_thickness"], cfg["geometry"]["length"]
+    eps_c = s["critical"]["applied_strain"]
+
+    def stress(e):  # compressive nominal stress of the film at compressive strain e
+        return -_undrained_pxx(film, -e)
+
+    switch = s["postbuckling"]["switches"][0]["time"]
     fund_at = {round(float(r["time"]), 9): r for r in fund}
-    compared = 0
+    ratios = []
     for r in branch:
         t = round(float(r["time"]), 9)
         if t > switch + 1e-9 and t in fund_at:
             # same applied displacement (the loading is displacement-driven): the stored energy is the potential
-            assert float(r["energy"]) < float(fund_at[t]["energy"]), t
+            eps = float(r["applied_strain"])
+            released = float(fund_at[t]["energy"]) - float(r["energy"])
+            law = h * length * quad(lambda e: stress(e) - stress(eps_c), eps_c, eps)[0]
+            ratios.append(released / law)
             assert float(fund_at[t]["amplitude_mm"]) < 1e-9  # the fundamental path stays flat
-            compared += 1
-    assert compared >= 10
+    assert len(ratios) >= 10
+    assert all(abs(q - 1) < 0.05 for q in ratios), ratios
+    assert max(ratios) - min(ratios) < 0.005, ratios
     assert "postbuckling" not in s_f and len(s_f["crossings"]) >= 1
 
 
@@ -116,7 +141,7 @@ def test_either_imperfection_sign_gives_the_same_amplitude(branch_runs):
     for r in minus:
         t = round(float(r["time"]), 9)
         if t > switch + 0.05 and t in a:
-            assert float(r["amplitude_mm"]) == pytest.approx(a[t], rel=0.02)
+            assert float(r["amplitude_mm"]) == pytest.approx(a[t], rel=1e-3)  # measured up to 2.2e-4
             compared += 1
     assert compared >= 5
 
@@ -173,9 +198,8 @@ def test_distributed_branch_equals_serial(branch_runs, tmp_path):
 
 
 def test_paper_bilayer_is_followed_until_the_model_ends(tmp_path):
-    """configs/bilayer.toml on a coarse mesh with after_onset = "branch": past its onset the run reaches twice
-    g_c or ends with status contact / inverted naming when and where, never a solver failure, with everything
-    kept. On the branch the surface keeps the wrinkle count of the critical eigenmode (computed from the
+    """configs/bilayer.toml on a coarse mesh with after_onset = "branch": past its onset the run reaches
+    time.end at more than twice g_c, never a solver failure. On the branch the surface keeps the wrinkle count of the critical eigenmode (computed from the
     eigenvector, independently of the branch's surface profiles) and the amplitude grows, up to the next
     crossing (docs/postbuckling.md: period doubling, then a fold)."""
     repo = Path(__file__).resolve().parents[1]
@@ -185,12 +209,11 @@ def test_paper_bilayer_is_followed_until_the_model_ends(tmp_path):
     s = simulate(cfg, base / "out", comm, progress=False)
     rows = _rows(base / "out")
     gc = s["critical"]["growth_mm"]
-    assert s["status"] in ("buckled", "contact", "inverted"), s["message"]
-    if s["status"] == "buckled":
-        assert float(rows[-1]["growth_mm"]) >= 2 * gc
-    else:  # the message says when and where; the last row is the last accepted state
-        assert re.search(r"near the reference point \(.+\) mm .*t = [0-9.]+ s", s["message"]), s["message"]
-        assert s["final"]["growth_mm"] == pytest.approx(float(rows[-1]["growth_mm"]))
+    # on this mesh the branch reaches time.end (docs/postbuckling.md); the finer meshes' fold is tested on a
+    # computed state below (test_a_computed_branch_ends_in_self_contact)
+    assert s["status"] == "buckled", s["message"]
+    assert float(rows[-1]["growth_mm"]) >= 2 * gc
+    assert float(rows[-1]["time"]) == pytest.approx(cfg["time"]["end"])
     switches = s["postbuckling"]["switches"]
     crossings = s["postbuckling"]["branch_crossings"]
     first_switch = switches[0]["time"]
@@ -311,3 +334,58 @@ def test_stop_at_onset_keeps_working():
         == "fundamental"
     assert StabilitySettings.from_config(config.resolve({})).policy.after.value == "stop"
     assert StabilitySettings.from_config(config.resolve({}, ["stability.after_onset=branch"])).policy.branches
+
+
+# docs/postbuckling.md's mesh sequence, its coarsest level: the paper's bilayer at element 0.008 mm, 4 film layers
+PERIOD_DOUBLING = ["stability.after_onset=branch", "stability.error_estimate=false", "mesh.element_size=0.008",
+                   "mesh.film_layers=4", "time.end=1.6", "output.fields=false", "output.plot=false"]
+
+
+@pytest.fixture(scope="module")
+def period_doubling(tmp_path_factory):
+    repo = Path(__file__).resolve().parents[1]
+    cfg = config.load(repo / "configs" / "bilayer.toml", PERIOD_DOUBLING)
+    out = tmp_path_factory.mktemp("pd") / "out"
+    s = simulate(cfg, out, MPI.COMM_SELF, progress=False)
+    return s, _rows(out), out
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="a 2-minute serial run: the serial session runs it")
+def test_period_doubling_on_the_branch_is_detected_and_followed(period_doubling):
+    """On the followed primary branch (N_c wrinkles) the state first settles (the negative eigenvalues left by
+    the switch vanish: `restabilized`), then loses stability again to a mode of half the count (period
+    doubling: a physical check, every other trough deepens), which is bisected, recorded in
+    `branch_crossings` and switched along. The secondary onset is a labelled pin: 12.83 um on this mesh
+    (docs/postbuckling.md; not mesh-converged, the finest level gives 9.01 um)."""
+    s, rows, _ = period_doubling
+    pb = s["postbuckling"]
+    n_c = s["critical"]["wrinkle_count"]
+    first_switch = pb["switches"][0]["time"]
+    crossings = pb["branch_crossings"]
+    assert crossings, "no secondary bifurcation found on the branch"
+    second = crossings[0]
+    assert abs(second["wrinkle_count"] - n_c / 2) <= 0.5  # period doubling
+    assert second["growth_um"] == pytest.approx(12.83, rel=1e-3)  # pin (docs/postbuckling.md)
+    assert second["bracket"][1] - second["bracket"][0] <= 1e-3 * second["bracket"][1]
+    settled = [r for r in pb["restabilized"] if first_switch < r["time"] < second["time"]]
+    assert settled and settled[-1]["negative_eigenvalues"] == 0  # stable on the branch before the doubling
+    assert [sw["wrinkle_count"] for sw in pb["switches"][:2]] == [n_c, second["wrinkle_count"]]
+    assert pb["switches"][1]["time"] >= second["bracket"][1] - 1e-12  # switched at the bracket's unstable end
+    on_branch = [r for r in rows if first_switch < float(r["time"]) < second["bracket"][0]]
+    assert {float(r["wrinkle_count"]) for r in on_branch} == {n_c}
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="a 2-minute serial run: the serial session runs it")
+def test_a_computed_branch_ends_in_self_contact(period_doubling):
+    """The same run, no monkeypatching: after the period doubling the troughs' flanks meet (docs/postbuckling.md:
+    the fold follows within 0.1 um); the run ends with status contact, the message naming the place and
+    time, the last accepted state kept in history.csv and profiles.npz."""
+    s, rows, out = period_doubling
+    assert s["status"] == "contact", s["message"]
+    assert re.search(r"folds onto itself .*near the reference point \([0-9.]+, [0-9.]+\) mm at t = [0-9.]+ s",
+                     s["message"]), s["message"]
+    second = s["postbuckling"]["branch_crossings"][0]["growth_um"]
+    assert second < 1e3 * s["final"]["growth_mm"] < second * 1.02
+    assert s["final"]["time"] == pytest.approx(float(rows[-1]["time"]))
+    with np.load(out / "profiles.npz") as z:
+        assert z["time"][-1] == pytest.approx(float(rows[-1]["time"]))

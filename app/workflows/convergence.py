@@ -2,7 +2,8 @@
 
 Time: the adaptive integrator's tolerance is divided by ``time_factor`` (4) per level; for backward
 Euler with local-error control the steps scale as sqrt(tolerance), so each level halves the steps
-(refinement ratio 2). With ``time.adaptive = false`` the fixed step is halved instead. Mesh: the
+(refinement ratio 2); time.dt_initial and time.dt_max are halved with them, so that steps held by a
+bound refine too. With ``time.adaptive = false`` the fixed step is halved instead. Mesh: the
 element size along the surface is divided and the number of film element layers multiplied by
 ``mesh_factor`` (2) per level, so element shapes are kept while h halves.
 
@@ -73,7 +74,15 @@ def refined_configs(cfg: dict, study: str, levels: int, time_factor: float, mesh
         changes = {"stability.stop_at_onset": True}
         if study == "time":
             if cfg["time"]["adaptive"]:
-                value = changes["time.tolerance"] = cfg["time"]["tolerance"] / time_factor ** e
+                # the steps scale as sqrt(tolerance); the step bounds scale with them, or the steps a bound
+                # holds (dt_max in a slow phase, dt_initial at the start) would not refine and the level
+                # would be less than a refinement by sqrt(time_factor) (an error estimate from it too small)
+                t = cfg["time"]
+                value = changes["time.tolerance"] = t["tolerance"] / time_factor ** e
+                r = time_factor ** (0.5 * e)
+                dt0 = min(t["dt_initial"] / r, t["end"])
+                changes.update({"time.dt_initial": dt0, "time.dt_max": max(t["dt_max"] / r, dt0),
+                                "time.dt_min": min(t["dt_min"], dt0)})
             else:
                 value = dt = cfg["time"]["dt_initial"] / 2 ** e
                 changes.update({"time.dt_initial": dt, "time.dt_min": min(cfg["time"]["dt_min"], dt),
