@@ -2,7 +2,9 @@
 # Prove the test suite bites: apply deliberate breakages one at a time to a scratch copy of the
 # working tree and run the tests that should notice; each must fail. Prints a Markdown table
 # (docs/testing.md keeps the last one). Not part of .ci/run (several minutes).
-#   bash scripts/mutation-check.sh [NAME ...]     (default: every mutation)
+#   bash scripts/mutation-check.sh [--ranks N] [NAME ...]   (default: serially, every mutation)
+# --ranks 2 runs the tests under `mpirun -n 2` (scripts/pytest-rank.sh), so the 2-rank-only tests take part;
+# a mutation whose tests are all skipped there (serial-only tests) is reported "n/a".
 # Exit code 1 if the unmutated tests fail or any mutation survives (or no longer applies).
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -19,7 +21,11 @@ import time
 from pathlib import Path
 
 here = Path(sys.argv[1])
-only = set(sys.argv[2:])
+args = sys.argv[2:]
+ranks = 1
+if args[:1] == ["--ranks"]:
+    ranks, args = int(args[1]), args[2:]
+only = set(args)
 
 # (name, file, regex, replacement, tests that must fail)
 MUTATIONS = [
@@ -62,6 +68,37 @@ MUTATIONS = [
     ("a history row that did not fit is left in part (not cut back off)", "app/io/writes.py",
      r"os\.ftruncate\(self\.fd, start\)", "pass",
      ["tests/test_write_errors.py::test_a_row_that_does_not_fit_is_cut_back_off"]),
+    ("surface self-contact never found", "app/onset/contact.py",
+     r"pair = _segments_cross\(x, closed\)", "pair = None",
+     ["tests/test_postbuckling.py::test_inversion_check_on_a_computed_creased_state"]),
+    ("closed passage ordered along x for the contact check", "app/onset/contact.py",
+     r"order = np\.argsort\(np\.arctan2\(rel\[:, 1\], rel\[:, 0\]\)\)", "order = np.argsort(rel[:, 0])",
+     ["tests/test_postbuckling.py::test_a_tube_branch_is_followed_around_its_closed_passage"]),
+    ("inverted cells never reported", "app/onset/contact.py",
+     r"if jmin > 0:", "if True:",
+     ["tests/test_postbuckling.py::test_inversion_check_on_a_computed_creased_state"]),
+    ("a new crossing on a branch not detected (the count only falls there)", "app/onset/tracker.py",
+     r"if nneg > self\.count:", "if nneg > self.count and not self.stepper.minimizing:",
+     ["tests/test_postbuckling.py::test_branch_crossings_on_a_branch_are_detected"]),
+    ("drained branch switch with its fluid content of the wrong sign (phase)", "app/onset/branching.py",
+     r"b\.scale\(-1\.0\)", "b.scale(1.0)",
+     ["tests/test_postbuckling.py::test_drained_switch_leaves_the_chemical_potential_unperturbed"]),
+    ("a minimizing step that ends uphill accepted", "app/solvers/stepping.py",
+     r"if not energy_decreased\(self\.solver\.last\):", "if False:",
+     ["tests/test_postbuckling.py::test_a_minimizing_step_that_ends_uphill_is_rejected"]),
+    ("the branch state not carried by a checkpoint (resumed on the fundamental path)", "app/solvers/stepping.py",
+     r'"minimizing": self\.minimizing,', '"minimizing": False,',
+     ["tests/test_checkpoint.py::test_resume_continues_like_an_uninterrupted_run"]),
+    ("a .msh mesh's mesh companion asks for an element size again", "app/workflows/error_estimate.py",
+     r"        return refined_configs\(cfg, study, 2, 4\.0, 2\.0\)\[1\]\[2\], \"refined\"", "        raise",
+     ["tests/test_own_geometry.py::test_readme_own_geometry_example_as_written"]),
+    ("time companion with its step bounds unchanged (dt_max holds the slow phase)", "app/workflows/convergence.py",
+     r'changes\.update\(\{"time\.dt_initial": dt0, "time\.dt_max": max\(t\["dt_max"\] / r, dt0\),',
+     'changes.update({"time.dt_initial": t["dt_initial"], "time.dt_max": t["dt_max"],',
+     ["tests/test_error_estimate.py"]),
+    ("result directory not locked (two runs into one directory)", "app/io/lock.py",
+     r"    problem = comm\.bcast\(problem, root=0\)\n    if problem:", "    problem = None\n    if problem:",
+     ["tests/test_result_lock.py"]),
 ]
 
 
@@ -79,10 +116,21 @@ def scratch_copy() -> Path:
 
 def pytest(root: Path, tests) -> tuple[int, float, str]:
     t0 = time.perf_counter()
-    proc = subprocess.run([str(here / ".venv/bin/python"), "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
-                           "--color=no", *tests], cwd=root, capture_output=True, text=True)
-    last = [line for line in proc.stdout.splitlines() if line.strip()][-1:] or [""]
-    return proc.returncode, time.perf_counter() - t0, last[0]
+    if ranks == 1:
+        cmd = [str(here / ".venv/bin/python"), "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "--color=no", *tests]
+    else:  # the scratch copy's scripts/pytest-rank.sh runs its .venv (a link to this checkout's) from the copy
+        if not (root / ".venv").exists():
+            (root / ".venv").symlink_to(here / ".venv")
+        cmd = ["mpirun", "-n", str(ranks), *os.environ.get("HB_MPIRUN_FLAGS", "").split(), "bash",
+               str(root / "scripts" / "pytest-rank.sh"), "-x", *tests]
+    proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True)
+    lines = [line for line in proc.stdout.splitlines() if re.search(r"(passed|failed|skipped|error)", line)
+             and " in " in line] or [line for line in proc.stdout.splitlines() if line.strip()][-1:] or [""]
+    return proc.returncode, time.perf_counter() - t0, lines[-1]
+
+
+def all_skipped(last: str) -> bool:
+    return "skipped" in last and not re.search(r"\d+ (passed|failed|error)", last)
 
 
 selected = [m for m in MUTATIONS if not only or any(o in m[0] for o in only)]
@@ -111,9 +159,10 @@ for name, path, pattern, repl, tests in selected:
     (root / path).write_text(new)
     rc, secs, last = pytest(root, tests)
     caught = rc != 0
-    survived += not caught
-    rows.append((name, path, "caught" if caught else "SURVIVED", f"{secs:.0f}", last))
-    print(f"{'caught  ' if caught else 'SURVIVED'} {name}: {last} ({secs:.0f} s)", flush=True)
+    verdict = "caught" if caught else ("n/a (every test skipped)" if all_skipped(last) else "SURVIVED")
+    survived += verdict == "SURVIVED"
+    rows.append((name, path, verdict, f"{secs:.0f}", last))
+    print(f"{verdict:8s} {name}: {last} ({secs:.0f} s)", flush=True)
     shutil.rmtree(root)
 
 print()
@@ -121,6 +170,8 @@ print("| mutation | file | result | tests [s] | pytest's last line |")
 print("|---|---|---|---|---|")
 for r in rows:
     print("| " + " | ".join(r) + " |")
-print(f"\n{len(rows) - survived}/{len(rows)} mutations caught")
+na = sum(r[2].startswith("n/a") for r in rows)
+print(f"\n{len(rows) - survived - na}/{len(rows) - na} mutations caught on {ranks} rank(s)"
+      + (f" ({na} n/a: their tests run serially only)" if na else ""))
 sys.exit(1 if survived else 0)
 PY

@@ -541,3 +541,118 @@ def test_a_tube_branch_is_followed_around_its_closed_passage(monkeypatch, tmp_pa
     a1, n1 = surface_shape(problem, moved)
     assert n1 == n0 == switch["wrinkle_count"]
     assert a1 == pytest.approx(a0, rel=1e-9) and a0 == pytest.approx(by_time[round(t, 12)], rel=1e-12)
+
+
+def test_drained_switch_leaves_the_chemical_potential_unperturbed(monkeypatch, tmp_path):
+    """The drained mode carries the fluid content c = -K_cc^-1 K_cu u that keeps the fluid in equilibrium:
+    to first order the perturbation changes no cell's chemical potential (delta mu = dmu/dF : dF + dmu/ds ds
+    = 0 per cell: every cell's content is free to change). Without the content (an undrained
+    perturbation) delta mu is what the displacement alone makes; with the content of the wrong sign it is
+    twice that. Computed with UFL's directional derivative of mu at the switch of the coarse paper bilayer
+    (swelling, drained criterion); the ratios |delta mu| / |delta mu undrained|: see the assertions."""
+    import ufl
+
+    from app import compat
+    from app.onset.branching import BranchSwitcher
+
+    seen = {}
+    switch = BranchSwitcher.switch
+
+    def recorded(self, crossing):
+        before = self.p.state.x.array.copy()
+        out = switch(self, crossing)
+        if "delta" not in seen:
+            seen.update(problem=self.p, before=before, delta=self.p.state.x.array - before)
+        return out
+
+    monkeypatch.setattr(BranchSwitcher, "switch", recorded)
+    repo = Path(__file__).resolve().parents[1]
+    cfg = config.load(repo / "configs" / "bilayer.toml", COARSE_BRANCH + ["time.end=1.0"])
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    s = simulate(cfg, base / "out", comm, progress=False)
+    assert s["postbuckling"]["switches"][0]["with_flux"]
+    p, delta = seen["problem"], seen["delta"]
+    p.state.x.array[:] = seen["before"]
+    p.w.x.array[:] = 0.0
+    p.w.x.array[p.u_dofs] = seen["before"][p.u_dofs]  # the state itself: w = (u, dQ = 0)
+    direction = compat.Function(p.W)
+    V0 = compat.scalar_space(p.domain, "DG", 0)
+    dmu = compat.Function(V0)
+    n_owned = compat.num_owned_cells(p.domain)
+
+    def norm_of_delta_mu(d: np.ndarray) -> float:
+        direction.x.array[:] = d  # the state's Q_n grew by d's flux part: as a step's dQ, s = s_n - div dQ
+        compat.interpolate(dmu, compat.expression(ufl.derivative(p.pot.mu, p.w, direction), V0))
+        return float(np.sqrt(comm.allreduce(float(np.sum(dmu.x.array[:n_owned] ** 2)))))
+
+    undrained = delta.copy()
+    undrained[p.q_dofs] = 0.0
+    wrong = delta.copy()
+    wrong[p.q_dofs] *= -1.0
+    ref = norm_of_delta_mu(undrained)
+    drained, flipped = norm_of_delta_mu(delta) / ref, norm_of_delta_mu(wrong) / ref
+    # measured 3.7e-10 (the content solve's tolerance and the 1/tau term) and 2 - 1.3e-10
+    assert drained < 1e-7, drained
+    assert flipped == pytest.approx(2.0, rel=1e-7)
+
+
+def test_a_minimizing_step_that_ends_uphill_is_rejected(monkeypatch, tmp_path):
+    """A branch step's minimizer must end at an energy not above its initial guess's: a solve reported
+    converged but uphill (here: the first one after the switch, its verdict's end energy raised) is
+    rejected like a failed solve, counted in postbuckling.minimizer.energy_rejections, and the step is
+    retried shorter; the run then goes on as before, each accepted step downhill."""
+    from app.solvers.minimizer import MinimizingNewton
+    from app.solvers.stepping import TimeStepper
+
+    solve, attempt = MinimizingNewton.solve, TimeStepper.attempt
+    state = {"done": False, "stepping": False}
+
+    def uphill_once(self):
+        res = solve(self)
+        if res.converged and state["stepping"] and not state["done"]:  # a time step's solve (not the relaxation)
+            state["done"] = True
+            self.last.energy_end = self.last.energy_start + 1.0
+        return res
+
+    def stepping(self, dt):
+        state["stepping"] = True
+        try:
+            return attempt(self, dt)
+        finally:
+            state["stepping"] = False
+
+    monkeypatch.setattr(MinimizingNewton, "solve", uphill_once)
+    monkeypatch.setattr(TimeStepper, "attempt", stepping)
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    s = simulate(_compression(), base / "out", comm, progress=False)
+    assert state["done"] and s["status"] == "buckled"
+    assert s["postbuckling"]["minimizer"]["energy_rejections"] == 1
+    assert s["failed_solves"] >= 1
+    assert s["final"]["time"] == pytest.approx(1.0)
+
+
+# a 4-wavelength strip of the paper's bilayer (element 0.008 mm, 4 film layers): its branch loses stability
+# again at 12.78 um (the full 2 mm bilayer on this mesh: 12.83 um, above), then folds
+STRIP = PERIOD_DOUBLING + ["geometry.length=0.4444"]
+
+
+def test_branch_crossings_on_a_branch_are_detected(tmp_path):
+    """A crossing on a followed branch (the negative count rising again) is detected, bisected to the stability
+    tolerance like the onset, recorded in branch_crossings and switched along; serially and on 2 ranks."""
+    repo = Path(__file__).resolve().parents[1]
+    cfg = config.load(repo / "configs" / "bilayer.toml", STRIP)
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    s = simulate(cfg, base / "out", comm, progress=False)
+    pb = s["postbuckling"]
+    assert pb["branch_crossings"], s["message"]
+    second = pb["branch_crossings"][0]
+    assert second["growth_mm"] > 1.5 * s["critical"]["growth_mm"]
+    lo, hi = second["bracket"]
+    assert hi - lo <= cfg["stability"]["tolerance"] * hi
+    assert second["lambda_min_before"] > 0 > second["lambda_min_after"]
+    assert len(pb["switches"]) >= 2 and pb["switches"][1]["time"] >= hi - 1e-12
+    assert pb["switches"][1]["wrinkle_count"] == second["first_mode_wrinkle_count"]
+    assert s["status"] == "contact", s["message"]
