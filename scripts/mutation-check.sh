@@ -124,6 +124,7 @@ def pytest(root: Path, tests) -> tuple[int, float, str]:
         cmd = ["mpirun", "-n", str(ranks), *os.environ.get("HB_MPIRUN_FLAGS", "").split(), "bash",
                str(root / "scripts" / "pytest-rank.sh"), "-x", *tests]
     proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True)
+    pytest.output = proc.stdout[-4000:]
     lines = [line for line in proc.stdout.splitlines() if re.search(r"(passed|failed|skipped|error)", line)
              and " in " in line] or [line for line in proc.stdout.splitlines() if line.strip()][-1:] or [""]
     return proc.returncode, time.perf_counter() - t0, lines[-1]
@@ -142,6 +143,7 @@ assert check.startswith(str(base)), f"the scratch copy's app is not the one impo
 rc, secs, last = pytest(base, tests_all)
 print(f"unmutated: {last} ({secs:.0f} s)", flush=True)
 if rc != 0:
+    print(pytest.output)
     print("mutation-check: the unmutated tests fail; fix them first")
     sys.exit(1)
 shutil.rmtree(base)

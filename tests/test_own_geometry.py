@@ -10,10 +10,11 @@ from __future__ import annotations
 import os
 import re
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, child_env, on_rank0, read_csv, read_json
+from conftest import EXE, REPO, child_env, on_rank0, read_csv, read_json
 from mpi4py import MPI
 
 from app import cli, config
@@ -36,7 +37,8 @@ def _readme_example(workdir):
     (workdir / "configs").symlink_to(REPO / "configs")
     (workdir / "my.toml").write_text(_block("my.toml", "toml"))
     env = child_env()
-    env["PATH"] = f"{REPO / '.venv' / 'bin'}{os.pathsep}{env['PATH']}"  # `source .venv/bin/activate`
+    env["PATH"] = f"{Path(EXE).parent}{os.pathsep}{env['PATH']}"  # `source .venv/bin/activate`
+    env["PYTHONPATH"] = str(REPO)  # this checkout's app (a scratch copy's too, scripts/mutation-check.sh)
     out = []
     for line in _block("commands", "bash").strip().splitlines():
         command = line.split("#")[0].strip()
