@@ -66,12 +66,15 @@ def test_console_script_exit_codes_from_any_directory(shared_tmp):
     assert ver.returncode == 0 and "dolfinx 0.5" in ver.stdout
 
 
-@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="installs a venv: the serial session does it once")
-def test_install_into_fresh_venv_creates_console_script(tmp_path):
+def test_install_into_fresh_venv_creates_console_script(shared_tmp):
     """scripts/install.sh, started from the checkout's root (where `import app` works without any
     install), must still install hydrobuckle into a fresh venv and create its console script; a
-    second run only checks."""
-    venv = tmp_path / "venv"
+    second run only checks. Rank 0 installs (in a 2-rank session too, so scripts/mutation-check.sh
+    --ranks 2 sees the install mutations)."""
+    on_rank0(_install_twice, shared_tmp / "venv")
+
+
+def _install_twice(venv):
     env = {**child_env(), "HYDROBUCKLE_VENV": str(venv), "HYDROBUCKLE_NO_WARMUP": "1"}
     first = subprocess.run(["bash", "scripts/install.sh"], cwd=REPO, env=env, capture_output=True, text=True,
                            timeout=600)

@@ -198,3 +198,21 @@ def test_converge_refines_a_msh_mesh(shared_tmp, comm, capsys):
     if comm.rank == 0:
         assert len(err) == 1 and "'mesh.refinements'" in err[0] and "cannot be coarsened" in err[0], err
     assert not refused.exists()
+
+
+def test_msh_run_with_default_settings_reports_an_error_bar(shared_tmp, comm):
+    """The same path as the README's example on a small file, in-process (serially and on 2 ranks): a .msh
+    run with the default stability.error_estimate ends buckled with both parts of its error bar, the mesh
+    part from the file split once (4x the cells), the time part from a companion 2x coarser in its steps."""
+    from app.workflows.pipeline import run_case
+
+    cfg = config.load(_small_msh_config(shared_tmp))
+    assert cfg["stability"]["error_estimate"] and cfg["mesh"]["refinements"] == 0
+    out = shared_tmp / "msh-run"
+    s = run_case(cfg, out, comm, progress=False)
+    assert s["status"] == "buckled" and "after_run_error" not in s
+    err = s["critical"]["discretization_error"]
+    assert err["mesh_companion"] == "refined" and err["mesh_um"] > 0 and err["time_um"] > 0
+    fine = read_json(out / "error-estimate" / "mesh" / "summary.json")
+    assert fine["mesh"]["cells"] == 4 * s["mesh"]["cells"]
+    assert read_json(out / "summary.json")["critical"]["discretization_error"] == err
