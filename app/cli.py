@@ -241,7 +241,8 @@ def cmd_run(args) -> int:
             outdir = Path(args.resume)
             from app.io import lock
 
-            lock.claim(outdir, comm, "--resume")  # a live job's checkpoint is not to be read, nor its directory
+            if outdir.is_dir():  # a live job's checkpoint is not to be read, nor its directory written
+                lock.claim(outdir, comm, "--resume")
             resume = checkpoint.check(outdir, cfg, comm)
         _take_output(outdir, comm)
     except config.ConfigError as err:

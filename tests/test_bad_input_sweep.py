@@ -25,6 +25,8 @@ NUM = r"(-?[0-9.eE+-]+)"
 # keys a closed end is only valid with (other keys' checks relate them): (key, value) -> companions
 COMPANIONS = {
     ("geometry.kind", "msh"): {"geometry": MSH_BASE},
+    # splitting a file's cells applies to the msh kind only
+    ("mesh.refinements", 4): {"geometry": {"kind": "msh", **MSH_BASE}},
     # a/b = 10 at the same area needs a passage of radius < R/sqrt(10): a thick substrate
     ("geometry.aspect_ratio", 10.0): {"geometry": {"substrate_thickness": 0.7, "film_thickness": 0.02}},
 }

@@ -5,9 +5,10 @@ A second job that would write the same directory, a directory inside it, or a di
 one a live job holds, is refused before it writes anything: one line naming the directory and the other
 job (its pid, host, command and start time), exit 2. The operating system releases the lock when the
 holding process ends in any way (a normal end, an exception, SIGKILL), so a finished or killed job
-never blocks a later one, and a finished directory can be overwritten as before. The lock file itself
-stays (removing it would let two jobs lock two different files of one name); its content is the last
-holder's description.
+never blocks a later one, and a finished directory can be overwritten as before. A job removes its lock
+file when it ends (a directory holds no trace of the lock afterwards; one killed by SIGKILL leaves the
+file, unlocked); a job that locked a file its previous holder has just removed tries again on the new
+file, so two jobs never hold two files of one name.
 
 Rank 0 takes and tests the locks and every rank gets its verdict. Processes a job starts itself (the
 ``mpirun`` launches of ``bench --ranks``) inherit its locks through the environment variable
@@ -16,6 +17,7 @@ Rank 0 takes and tests the locks and every rank gets its verdict. Processes a jo
 
 from __future__ import annotations
 
+import atexit
 import datetime
 import fcntl
 import json
@@ -113,16 +115,27 @@ def _acquire(directory: Path) -> str | None:
     if problem:
         return problem
     Path(key).mkdir(parents=True, exist_ok=True)
-    fd = os.open(Path(key) / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:  # taken between the test and now
+    path = Path(key) / LOCK_NAME
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:  # taken between the test and now
+            os.close(fd)
+            return f"is in use by {_holder(path)}"
+        try:  # a holder that ended removes its file: ours must still be the one the path names
+            if os.stat(path).st_ino == os.fstat(fd).st_ino:
+                break
+        except FileNotFoundError:
+            pass
         os.close(fd)
-        return f"is in use by {_holder(Path(key) / LOCK_NAME)}"
     me = {"pid": os.getpid(), "host": socket.gethostname(), "command": " ".join(["hydrobuckle", *sys.argv[1:]]),
           "started": datetime.datetime.now().isoformat(timespec="seconds")}
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, (json.dumps(me) + "\n").encode(), 0)
+    try:  # the description is for the message of a refused job; the lock is the flock (a full disk: no text)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, (json.dumps(me) + "\n").encode(), 0)
+    except OSError:
+        pass
     _held[key] = fd
     return None
 
@@ -143,10 +156,21 @@ def claim(directory, comm, option: str = "-o/--output") -> None:
 
 
 def release_all() -> None:
-    """Release every lock this process holds (the end of a command run in-process)."""
-    for fd in _held.values():
+    """Release every lock this process holds and remove its files (the end of a command): a directory is
+    left as the command left it, without a lock file (a job killed by SIGKILL leaves its file behind,
+    unlocked: harmless, the next job takes it)."""
+    for key, fd in _held.items():
+        try:
+            path = Path(key) / LOCK_NAME
+            if os.stat(path).st_ino == os.fstat(fd).st_ino:
+                path.unlink()
+        except OSError:
+            pass
         try:
             os.close(fd)
         except OSError:
             pass
     _held.clear()
+
+
+atexit.register(release_all)  # a command that ends without passing through cli.main's own release
