@@ -590,3 +590,15 @@ def test_user_msh_resumes_and_an_edited_file_is_refused(shared_tmp, comm, capsys
     assert main(["run", str(toml), "--resume", str(edited), "-q"]) == 2
     _one_error_line(capsys, comm, "geometry.file", "changed since the checkpoint")
     assert on_rank0(_listing, edited) == listing
+
+
+def test_a_checkpoint_from_before_mesh_refinements_still_resumes(shared_tmp, comm):
+    """mesh.refinements came after checkpoints did: a checkpoint whose stored config lacks it (at 0, what
+    its absence meant) has the same result-changing keys, and one with the key at 1 differs (named)."""
+    cfg = swelling_case(*EVERY)
+    old = copy.deepcopy(cfg)
+    del old["mesh"]["refinements"]
+    assert checkpoint.result_hash(old) == checkpoint.result_hash(cfg)
+    refined = copy.deepcopy(cfg)
+    refined["mesh"]["refinements"] = 1
+    assert checkpoint.first_difference(old, refined) == "mesh.refinements = '<unset>' in the checkpoint, 1 now"

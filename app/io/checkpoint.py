@@ -77,9 +77,15 @@ def _free(key: str) -> bool:
     return any(key == f or key.startswith(f + ".") for f in FREE_KEYS)
 
 
+# keys added after checkpoints were first written, with the value that means what their absence meant: left
+# out of the comparison at that value, so such a checkpoint still resumes
+ADDED_KEYS = {"mesh.refinements": 0}
+
+
 def result_keys(cfg: dict) -> dict:
-    """The flattened config without :data:`FREE_KEYS`: what must be equal for a resume."""
-    return {k: v for k, v in _flat(cfg).items() if not _free(k)}
+    """The flattened config without :data:`FREE_KEYS` (and :data:`ADDED_KEYS` at their old meaning): what
+    must be equal for a resume."""
+    return {k: v for k, v in _flat(cfg).items() if not _free(k) and not (k in ADDED_KEYS and v == ADDED_KEYS[k])}
 
 
 def result_hash(cfg: dict) -> str:
