@@ -85,7 +85,7 @@ def _conflict(directory: Path) -> str | None:
     here = Path(key)
     for other in [here, *here.parents]:
         lock_file = other / LOCK_NAME
-        if str(other) in _held or str(other) in _inherited() or not lock_file.is_file() or not _live(lock_file):
+        if _mine(str(other)) or not lock_file.is_file() or not _live(lock_file):
             continue
         where = "is" if other == here else f"lies inside '{other}', which is"
         return f"{where} in use by {_holder(lock_file)}"
@@ -109,7 +109,7 @@ def _locks_below(directory: Path) -> list[Path]:
 def _acquire(directory: Path) -> str | None:
     """Rank 0: lock ``directory`` (created if missing) for this process; a sentence if another job holds it."""
     key = _key(directory)
-    if key in _held or key in _inherited():
+    if _mine(key):
         return None
     problem = _conflict(directory)
     if problem:
