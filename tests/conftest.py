@@ -365,6 +365,8 @@ def tmpfs(shared_tmp):
         return path
 
     yield mount
+    if mounted:  # every rank is done with the disk's files before rank 0 unmounts it (rank 1 read a summary
+        MPI.COMM_WORLD.barrier()  # there after rank 0 had unmounted: FileNotFoundError in one CI run)
     for path in mounted:
         on_rank0(unmount, path)
 
