@@ -85,12 +85,7 @@ class UserMsh(GeometryKind):
             raise ConfigError("mesh.refinements", f"= {cfg['mesh']['refinements']} cannot be coarsened "
                               f"{-exponent} time(s): a .msh mesh is only refined (every cell split into 4); "
                               f"allowed: mesh.refinements >= {-exponent}, or refine instead of coarsening")
-        if level > REFINEMENTS_MAX:
-            raise ConfigError("mesh.refinements", f"= {level} is out of range; allowed: 0..{REFINEMENTS_MAX}")
-        return 2.0 ** -level, {"mesh.refinements": level}
-
-
-REFINEMENTS_MAX = 4
+        return 2.0 ** -level, {"mesh.refinements": level}  # the schema checks the upper bound (variant)
 
 
 def read(comm, path: str | Path, rank: int = 0, refinements: int = 0) -> TaggedMesh:
@@ -103,11 +98,9 @@ def read(comm, path: str | Path, rank: int = 0, refinements: int = 0) -> TaggedM
     path = Path(path)
     with gmsh_session(comm, "user-msh", rank) as active:
         cells, facets = _merge(comm, path, rank, active)
-        info = {"file": str(path), "refinements": int(refinements)}
         if refinements:
-            info["file_cells"] = on_gmsh_rank(comm, rank, active, msh.refine, 0)
             on_gmsh_rank(comm, rank, active, msh.refine, refinements)
-        return to_dolfinx(comm, rank, cells, facets, info)
+        return to_dolfinx(comm, rank, cells, facets, {"file": str(path), "refinements": int(refinements)})
 
 
 def physical_groups(comm, path: str | Path, rank: int = 0) -> tuple[dict[str, int], dict[str, int]]:

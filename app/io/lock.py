@@ -100,7 +100,7 @@ def _conflict(directory: Path) -> str | None:
 def _locks_below(directory: Path) -> list[Path]:
     """The lock files in the tree below ``directory`` (unreadable subdirectories skipped)."""
     found = []
-    for root, dirs, files in os.walk(directory, onerror=lambda _err: None):
+    for root, _dirs, files in os.walk(directory, onerror=lambda _err: None):
         if LOCK_NAME in files:
             found.append(Path(root) / LOCK_NAME)
     return sorted(found)
