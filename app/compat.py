@@ -39,6 +39,34 @@ def mixed_displacement_content_space(domain):
     return fem.FunctionSpace(domain, ufl.MixedElement([u_el, c_el]))
 
 
+def mixed_lagrange_space(domain, degree: int, count: int):
+    """``count`` scalar Lagrange fields of one degree in one mixed space (the 1D reduction's unknowns)."""
+    el = ufl.FiniteElement("Lagrange", domain.ufl_cell(), degree)
+    return fem.FunctionSpace(domain, ufl.MixedElement([el] * count))
+
+
+def interval_mesh(comm, nodes: np.ndarray):
+    """A 1D mesh whose vertices are the increasing coordinates ``nodes`` (a graded interval)."""
+    nodes = np.asarray(nodes, dtype=float)
+    domain = dmesh.create_interval(comm, len(nodes) - 1, [0.0, 1.0])
+    x = domain.geometry.x
+    # the uniform mesh's vertex at t = i/n moves to nodes[i]: an order-preserving map, so every cell
+    # keeps its two vertices' neighbours
+    t = x[:, 0].copy()
+    x[:, 0] = np.interp(t, np.linspace(0.0, 1.0, len(nodes)), nodes)
+    return domain
+
+
+def dof_coordinates(V) -> np.ndarray:
+    """x of each local dof of a scalar space (collapsed sub-spaces included)."""
+    return V.tabulate_dof_coordinates()[:, 0].copy()
+
+
+def matrix_csr(A):
+    """(indptr, indices, values) of an assembled serial PETSc matrix."""
+    return A.getValuesCSR()
+
+
 def scalar_space(domain, family: str, degree: int):
     return fem.FunctionSpace(domain, (family, degree))
 
@@ -297,6 +325,13 @@ def assemble_residual_into(b, L, a, bcs, x, lifting: bool = True):
         fem_petsc.apply_lifting(b, [a], bcs=[bcs], x0=[x], scale=-1.0)
     b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
     fem_petsc.set_bc(b, bcs, x, -1.0)
+
+
+def assemble_matrix(a, bcs=()):
+    """A new assembled matrix of the bilinear form ``a``."""
+    A = fem_petsc.assemble_matrix(a, bcs=list(bcs))
+    A.assemble()
+    return A
 
 
 def assemble_vector(L) -> PETSc.Vec:
