@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sla
-import scipy.sparse as sp
 import ufl
 
 from app import compat
@@ -46,7 +45,7 @@ def reduced_content(shape: str, k, A, B, r):
 class ModeOperator:
     """K(k) of one criterion on a 1D mesh, about a base state (F0, s0) given as UFL expressions (Functions
     of a :class:`~app.reduced.transient.LayeredModel`, or constants for the half-space), banded in the
-    dofs' coordinate order with the held dofs removed."""
+    dofs' coordinate order with the held dofs removed (LAPACK lower band storage, ab[i - j, j] = K[i, j])."""
 
     def __init__(self, domain, shape: str, degree: int, F0, s0, mat, criterion: str, *, tau=None, weight=1.0,
                  held: dict[int, float] | None = None, quadrature_degree: int | None = None):
@@ -101,33 +100,41 @@ class ModeOperator:
         self.dofs = index[keep][order]  # row i of the reduced matrix = dof self.dofs[i]
         self.n = len(self.dofs)
         self.bandwidth = None
+        self._band_index = None
+        self._A = None
 
-    def _assemble(self, k: float) -> sp.csr_matrix:
+    def _values(self, k: float) -> np.ndarray:
+        """The assembled matrix's CSR values at wavenumber k (its pattern is the same for every k)."""
         self.k.value = k
-        A = compat.assemble_matrix(self.form)
-        indptr, indices, values = compat.matrix_csr(A)
-        K = sp.csr_matrix((values, indices, indptr), shape=A.getSize())
-        A.destroy()
-        return K[self.dofs][:, self.dofs]
+        if self._A is None:
+            self._A = compat.create_matrix(self.form)
+        compat.assemble_matrix_into(self._A, self.form, [])
+        indptr, indices, values = compat.matrix_csr(self._A)
+        if self._band_index is None:
+            self._band_index = self._pattern(indptr, indices)
+        return values
+
+    def _pattern(self, indptr, indices):
+        """Where each stored entry of the lower triangle (kept dofs) goes in band storage."""
+        pos = np.full(self.S.dofmap.index_map.size_local * self.S.dofmap.index_map_bs, -1, dtype=np.int64)
+        pos[self.dofs] = np.arange(self.n)
+        rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+        i, j = pos[rows], pos[indices]
+        take = (i >= 0) & (j >= 0) & (i >= j)
+        self.bandwidth = int(np.max(i[take] - j[take]))
+        flat = (i[take] - j[take]) * self.n + j[take]  # ab[i - j, j], row-major (bandwidth + 1, n)
+        return np.flatnonzero(take), flat
 
     def polynomial(self) -> BandedPencil:
         """K0, K1, K2 at the current base state (the caller sets it)."""
-        K0, Kp, Km = self._assemble(0.0), self._assemble(1.0), self._assemble(-1.0)
-        K1 = 0.5 * (Kp - Km)
-        K2 = 0.5 * (Kp + Km) - K0
-        if self.bandwidth is None:
-            coo = (abs(K0) + abs(K1) + abs(K2)).tocoo()
-            self.bandwidth = int(np.max(np.abs(coo.row - coo.col)))
-        return BandedPencil([_lower_band(M, self.bandwidth) for M in (K0, K1, K2)])
-
-
-def _lower_band(M: sp.csr_matrix, b: int) -> np.ndarray:
-    """LAPACK lower band storage: ab[i - j, j] = M[i, j] for 0 <= i - j <= b."""
-    n = M.shape[0]
-    ab = np.zeros((b + 1, n))
-    coo = sp.tril(M).tocoo()
-    ab[coo.row - coo.col, coo.col] = coo.data
-    return ab
+        v0, vp, vm = self._values(0.0), self._values(1.0), self._values(-1.0)
+        take, flat = self._band_index
+        bands = []
+        for vals in (v0, 0.5 * (vp - vm), 0.5 * (vp + vm) - v0):
+            ab = np.zeros((self.bandwidth + 1) * self.n)
+            ab[flat] = vals[take]  # each (i, j) is stored once
+            bands.append(ab.reshape(self.bandwidth + 1, self.n))
+        return BandedPencil(bands)
 
 
 class BandedPencil:

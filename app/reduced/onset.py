@@ -108,11 +108,11 @@ class Screen:
         self.stab, self.grid, self.horizon, self.t_end = stab, grid, horizon, t_end
         self.section = stab.model.section
         self.first_unstable: dict = {}  # mode n (None: the short-wave limit) -> index of its first indefinite step
-        self.index = 0
+        self.index = 0  # of the step screened last
         self.t_first: float | None = None
 
-    def __call__(self, snap: Snapshot) -> bool:
-        self.index += 1
+    def __call__(self, snap: Snapshot, index: int) -> bool:
+        self.index = index
         if snap.t == 0.0:
             return False
         P = self.stab.pencil(snap)

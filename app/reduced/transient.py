@@ -18,8 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
+import scipy.linalg as sla
 import ufl
 from mpi4py import MPI
 
@@ -41,7 +40,7 @@ class Resolution:
     degree: int = 3
     film_cells: int = 8
     grading: float = 1.25
-    step_change: float = 0.02
+    step_change: float = 0.01
     dt_max: float = 0.05
     dt_first: float = 1.0e-3
 
@@ -75,6 +74,8 @@ class LayeredModel:
         self.dx = ufl.Measure("dx", domain=d, metadata={"quadrature_degree": 2 * res.degree + 2})
         self.r = ufl.SpatialCoordinate(d)[0]
         self.weight = self.r if section.shape == "axisymmetric" else 1.0
+        self._flat = None
+        self._A = None
         self._forms()
         self.fixed = self._fixed_dofs()
         self.surface_v = self._dof_at(self.v_dofs, self.x_v, section.surface)
@@ -156,15 +157,35 @@ class LayeredModel:
     # --- algebra --------------------------------------------------------------------------------
 
     def assemble(self):
-        """(residual array, Hessian CSR) at the current w."""
+        """(residual, Hessian in LAPACK general band storage in coordinate order :attr:`order`) at the
+        current w: a 1D system is banded."""
         b = compat.assemble_vector(self.residual)
         r = b.array.copy()
         b.destroy()
-        A = compat.assemble_matrix(self.hessian)
-        indptr, indices, values = compat.matrix_csr(A)
-        K = sp.csr_matrix((values, indices, indptr), shape=A.getSize())
-        A.destroy()
-        return r, K
+        if self._A is None:
+            self._A = compat.create_matrix(self.hessian)
+        compat.assemble_matrix_into(self._A, self.hessian, [])
+        indptr, indices, values = compat.matrix_csr(self._A)
+        if self._flat is None:
+            self._band_pattern(indptr, indices)
+        ab = np.zeros((2 * self.bandwidth + 1) * len(r))
+        ab[self._flat] = values
+        return r, ab.reshape(2 * self.bandwidth + 1, len(r))
+
+    def _band_pattern(self, indptr, indices) -> None:
+        n = len(indptr) - 1
+        coords = np.zeros(n)
+        field = np.zeros(n, dtype=int)
+        coords[self.v_dofs], coords[self.q_dofs] = self.x_v, self.x_q
+        field[self.q_dofs] = 1
+        self.order = np.lexsort((field, coords))  # position p holds dof order[p]
+        pos = np.empty(n, dtype=np.int64)
+        pos[self.order] = np.arange(n)
+        rows = np.repeat(np.arange(n), np.diff(indptr))
+        i, j = pos[rows], pos[indices]
+        self.bandwidth = int(np.max(np.abs(i - j)))
+        self._flat = (self.bandwidth + i - j) * n + j  # ab[u + i - j, j] = K[i, j]
+        self._pos = pos
 
 
 @dataclass
@@ -211,8 +232,6 @@ class Transient:
         w[m.v_dofs] = m.state.x.array[m.v_dofs]
         free = np.ones(len(w), dtype=bool)
         free[m.fixed] = False
-        P = sp.diags(free.astype(float))
-        Pc = sp.diags((~free).astype(float))
         r0 = None
         for it in range(self.max_it):
             r, K = m.assemble()
@@ -224,10 +243,8 @@ class Transient:
                 r0 = norm
             if norm <= max(self.rtol * r0, self.atol):
                 break
-            A = (P @ K @ P + Pc).tocsc()
-            try:
-                dw = spla.spsolve(A, -r)
-            except RuntimeError:
+            dw = self._solve(K, r, free)
+            if dw is None:
                 return False
             if not np.all(np.isfinite(dw)):
                 return False
@@ -241,12 +258,33 @@ class Transient:
         self.t += dt
         return True
 
+    def _solve(self, ab: np.ndarray, r: np.ndarray, free: np.ndarray):
+        """K dw = -r on the free dofs, held dofs unchanged (banded LU)."""
+        m = self.m
+        n, u = len(r), m.bandwidth
+        held = m._pos[~free]
+        ab = ab.copy()
+        for p in held:  # zero row and column p (ab[u + i - j, j] = K[i, j]), unit diagonal
+            ab[:, p] = 0.0
+            j = np.arange(max(0, p - u), min(n, p + u + 1))
+            ab[u + p - j, j] = 0.0
+            ab[u, p] = 1.0
+        rhs = -r[m.order]
+        rhs[held] = 0.0
+        try:
+            x = sla.solve_banded((u, u), ab, rhs, check_finite=False)
+        except (sla.LinAlgError, ValueError):
+            return None
+        dw = np.empty(n)
+        dw[m.order] = x
+        return dw
+
     def surface_content(self) -> float:
         m = self.m
         return float(m.state.x.array[m.surface_q])
 
     def run(self, t_end: float, stop=None, scale: int = 1, schedule: list[float] | None = None) -> list[Snapshot]:
-        """Advance to ``t_end`` (or until ``stop(snapshot)`` is true). Without ``schedule`` the steps adapt;
+        """Advance to ``t_end`` (or until ``stop(snapshot, index)`` is true). Without ``schedule`` the steps adapt;
         with it (the step sizes of another run) each is taken as ``scale`` equal sub-steps, so two runs
         differ only in their step size (Richardson)."""
         res = self.m.res
@@ -257,8 +295,8 @@ class Transient:
                     if not self.step(dt / scale):
                         raise TransientFailed(f"Newton failed at t = {self.t:.6g} s (step {dt / scale:.3g} s)")
                     self.steps.append(self._snapshot())
-                if stop is not None and stop(self.steps[-1]):
-                    break
+                    if stop is not None and stop(self.steps[-1], len(self.steps) - 1):
+                        return self.steps
             return self.steps
         dt = res.dt_first
         while self.t < t_end - 1e-12:
@@ -282,7 +320,7 @@ class Transient:
                 continue
             self.steps.append(self._snapshot())
             dt = dt_try * min(2.0, max(0.5, 0.9 * res.step_change / max(change, 1e-12)))
-            if stop is not None and stop(self.steps[-1]):
+            if stop is not None and stop(self.steps[-1], len(self.steps) - 1):
                 break
         return self.steps
 
