@@ -75,6 +75,12 @@ def _parser() -> argparse.ArgumentParser:
     conv.add_argument("--force", action="store_true", help="run every level anew (a rerun otherwise keeps the "
                       "levels an earlier converge finished and resumes an interrupted one from its checkpoint)")
     conv.add_argument("-q", "--quiet", action="store_true")
+    red = sub.add_parser("reduced", help="the exact 1D reduction of a bilayer or circular-tube config: g_c, N_c "
+                         "and the margin curve in seconds (docs/reduction.md)")
+    red.add_argument("config")
+    red.add_argument("-o", "--output", help="result directory (default results/<config name>-reduced)")
+    red.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    red.add_argument("-q", "--quiet", action="store_true")
     for command in (st, sw, conv, be):  # refused with a line that says how these commands continue
         command.add_argument("--resume", nargs="?", const="", default=None, help=argparse.SUPPRESS)
     return p
@@ -321,6 +327,38 @@ def _parse_values(text: str) -> list:
     return out
 
 
+def cmd_reduced(args) -> int:
+    comm = _comm()
+    from app.reduced.section import reducible
+
+    try:
+        cfg = config.load(args.config, args.set)
+        why = reducible(cfg)
+        if why:
+            raise config.ConfigError("", why)
+        outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-reduced")
+        _take_output(outdir, comm)
+    except config.ConfigError as err:
+        return _input_error(comm, err)
+    _setup_logging(comm, args.quiet)
+    from app import logging_setup
+    from app.reduced.transient import TransientFailed
+    from app.workflows import reduced
+
+    log = logging_setup.get()
+    code = EXIT_OK
+    if comm.rank == 0:  # a 1D problem: one rank computes, the others wait
+        try:
+            summary = reduced.run(cfg, outdir)
+            log.info("hydrobuckle: result: " + reduced.describe(summary["reduced"]) + f" ({outdir}, "
+                     f"{summary['reduced']['seconds']:.1f} s)")
+        except TransientFailed as err:
+            reduced.write_failure(outdir, cfg, str(err))
+            log.error(f"hydrobuckle: the 1D transient failed: {err}; summary.json says so")
+            code = EXIT_SOLVER
+    return comm.bcast(code, root=0)
+
+
 def cmd_study(args) -> int:
     from app.workflows import studies
 
@@ -528,7 +566,8 @@ def _setup_logging(comm, quiet: bool) -> None:
 
 
 COMMANDS = {"run": cmd_run, "validate": cmd_validate, "version": cmd_version, "converge": cmd_converge,
-            "mesh": cmd_mesh, "study": cmd_study, "sweep": cmd_sweep, "bench": cmd_bench, "warmup": cmd_warmup}
+            "mesh": cmd_mesh, "study": cmd_study, "sweep": cmd_sweep, "bench": cmd_bench, "warmup": cmd_warmup,
+            "reduced": cmd_reduced}
 
 
 def main(argv: list[str] | None = None) -> int:

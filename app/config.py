@@ -84,6 +84,25 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
         "error_estimate": _key(bool, True, None,
                                "estimate g_c's discretization error with two coarsened companion runs"),
     },
+    "reduced": {
+        "beside_2d": _key(bool, True, None, "a bilayer or circular-tube run also reports its exact 1D counterpart "
+                          "(summary.json 'reduced', docs/reduction.md)"),
+        "degree": _key(int, 3, _in_closed(1, 6), "Lagrange degree of the 1D fields"),
+        "film_cells": _key(int, 12, _in_closed(1, 512), "1D cells through the film"),
+        "grading": _key(float, 1.25, _in_closed(1.0, 3.0), "1D cell-size ratio away from the film"),
+        "surface_grading": _key(float, 1.35, _in_closed(1.0, 3.0),
+                                "1D cell-size ratio through the film away from the permeable surface (its "
+                                "diffusion boundary layer)"),
+        "step_change": _key(float, 0.01, _in_open(0.0, 0.5),
+                            "largest relative change of the displacement per time step of the 1D transient"),
+        "max_wavenumber": _key(float, 20.0, _in_closed(1.0, 1000.0),
+                               "largest k w screened mode by mode (k along the surface, w the film thickness); "
+                               "shorter waves: the surface's short-wave limit"),
+        "grid": _key(int, 48, _in_closed(8, 2000), "mode numbers screened every step (logarithmically spaced)"),
+        "horizon": _key(float, 0.5, _in_closed(0.0, 20.0),
+                        "continue this fraction of the first crossing time past it (the margin curve's later "
+                        "crossings)"),
+    },
     "output": {
         "fields": _key(bool, True, None, "write fields.xdmf"),
         "every": _key(int, 1, _ge(1), "write fields every n accepted steps"),

@@ -48,8 +48,9 @@ PROFILE_MEMBERS = {"growth_mm": "profile_growth", "time": "profile_time", "posit
                    "profile": "profile_value"}
 
 # Keys a resumed run may change: they decide when a run ends or what it writes, never a row before the
-# checkpoint or the continuation after it (time.end: only above the checkpoint's time, see check()).
-FREE_KEYS = ("output", "time.end", "time.max_steps", "stability.error_estimate")
+# checkpoint or the continuation after it (time.end: only above the checkpoint's time, see check()); reduced.*
+# only sets the 1D counterpart computed after the run.
+FREE_KEYS = ("output", "time.end", "time.max_steps", "stability.error_estimate", "reduced")
 
 
 class CheckpointError(config.ConfigError):

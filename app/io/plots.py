@@ -284,3 +284,27 @@ def amplitude_plot(rows: list[dict], critical: dict | None, path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def reduced_margin_plot(path, est, block: dict) -> None:
+    """The 1D reduction's margin curve: each mode's critical growth against its wrinkle count (and
+    wavelength), the onset marked, the surface's short-wave limit as a horizontal line."""
+    curve = est.levels[0].curve
+    ns = sorted(curve.modes)
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    if ns:
+        ax.plot([curve.modes[n].wrinkles for n in ns], [1e3 * curve.modes[n].growth for n in ns], ".-", color="C0",
+                ms=3, label=f"mode crossings ({block['criterion']})")
+    if curve.short_wave is not None:
+        ax.axhline(1e3 * curve.short_wave.growth, color="C3", ls="--", lw=1,
+                   label=f"short-wave limit of the surface: {1e3 * curve.short_wave.growth:.4g} um")
+    if block.get("kind") == "wrinkles":
+        ax.plot([block["wrinkle_count"]], [block["growth_um"]], "o", color="C3",
+                label=f"g_c = {block['growth_um']:.4g} um, N_c = {block['wrinkle_count']:g}")
+    ax.set_xlabel("wrinkle count N")
+    ax.set_ylabel("growth at the mode's crossing [um]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

@@ -85,12 +85,19 @@ class Section:
         """The wavenumber along the permeable surface [1/mm] (around the tube: n / passage radius)."""
         return self.wavenumber(n) if self.shape == "planar" else n / self.surface
 
-    def nodes(self, film_cells: int, grading: float) -> np.ndarray:
-        """Vertices of the 1D mesh: ``film_cells`` equal cells through the film; away from the film each
-        cell ``grading`` times the one before, from the film's cell size."""
+    def nodes(self, film_cells: int, grading: float, surface_grading: float = 1.0) -> np.ndarray:
+        """Vertices of the 1D mesh: ``film_cells`` cells through the film, each ``surface_grading`` times
+        the one nearer the permeable surface (where the state has a diffusion boundary layer); away from the
+        film each cell ``grading`` times the one before, from the film's cell at the interface."""
         film = self.film_layer
-        h = film.thickness / film_cells
-        pts = [np.linspace(film.start, film.end, film_cells + 1)]
+        toward_start = self.surface == film.start  # the permeable surface at the film's start (the tube)
+        q = surface_grading
+        sizes = q ** np.arange(film_cells)  # from the surface inwards
+        sizes *= film.thickness / sizes.sum()
+        x = np.concatenate([[0.0], np.cumsum(sizes)])
+        x[-1] = film.thickness
+        pts = [film.start + x if toward_start else film.end - x[::-1]]
+        h = sizes[-1]  # the film's cell at the interface
         for lay in self.layers:
             if lay is film:
                 continue

@@ -34,12 +34,13 @@ class TransientFailed(RuntimeError):
 
 @dataclass(frozen=True)
 class Resolution:
-    """The 1D discretization: element degree, cells through the film, cell growth away from it, and the
-    step control (relative change of the surface fluid content per step, largest step)."""
+    """The 1D discretization: element degree, cells through the film, cell growth away from it and through
+    the film away from the permeable surface, and the step control (relative change of the surface fluid content per step, largest step)."""
 
     degree: int = 3
-    film_cells: int = 8
+    film_cells: int = 12
     grading: float = 1.25
+    surface_grading: float = 1.35
     step_change: float = 0.01
     dt_max: float = 0.05
     dt_first: float = 1.0e-3
@@ -48,8 +49,8 @@ class Resolution:
         """Level ``level`` of the mesh sequence: cells halved ``level`` times (film cells doubled, the
         grading's root)."""
         f = 2 ** level
-        return Resolution(self.degree, self.film_cells * f, self.grading ** (1.0 / f), self.step_change,
-                          self.dt_max, self.dt_first)
+        return Resolution(self.degree, self.film_cells * f, self.grading ** (1.0 / f), self.surface_grading ** (1.0 / f),
+                          self.step_change, self.dt_max, self.dt_first)
 
 
 class LayeredModel:
@@ -57,7 +58,7 @@ class LayeredModel:
 
     def __init__(self, section: Section, res: Resolution, comm=MPI.COMM_SELF):
         self.section, self.res = section, res
-        self.nodes = section.nodes(res.film_cells, res.grading)
+        self.nodes = section.nodes(res.film_cells, res.grading, res.surface_grading)
         self.domain = compat.interval_mesh(comm, self.nodes)
         self.W = compat.mixed_lagrange_space(self.domain, res.degree, 2)
         self.w = compat.Function(self.W)  # (displacement, dQ of the step)

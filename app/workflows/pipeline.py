@@ -1,5 +1,6 @@
 """A result directory from a config, as ``run``, ``study`` and ``sweep`` make it: the simulation, then
-the steps that complete its summary (the companion error estimate when ``stability.error_estimate``),
+the steps that complete its summary (the companion error estimate when ``stability.error_estimate``; the
+exact 1D counterpart of a bilayer or circular tube when ``reduced.beside_2d``),
 then summary.json, written once, last of all: a directory without it holds an unfinished run.
 
 The other commands run plain simulations (a convergence level, a benchmark size, a companion run
@@ -8,7 +9,9 @@ itself) and take no pipeline steps.
 
 from __future__ import annotations
 
+from app.reduced.section import reducible
 from app.workflows.error_estimate import add_error_estimate
+from app.workflows.reduced import add_reduced
 from app.workflows.run import simulate
 
 
@@ -17,6 +20,8 @@ def after_run_steps(cfg: dict, outdir, comm) -> list:
     steps = []
     if cfg["stability"]["error_estimate"]:
         steps.append(lambda summary: add_error_estimate(summary, cfg, outdir, comm))
+    if cfg["reduced"]["beside_2d"] and not reducible(cfg):
+        steps.append(lambda summary: add_reduced(summary, cfg, comm))
     return steps
 
 

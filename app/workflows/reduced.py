@@ -1,0 +1,191 @@
+"""The exact 1D reduction as a command (``hydrobuckle reduced``) and beside every bilayer or tube run
+(the pipeline step :func:`add_reduced`: summary.json ``reduced``).
+
+A reduced answer is converged like a 2D one: three 1D computations (the base; its time steps halved; its
+mesh refined), the time-extrapolated value with an error bar from both differences
+(:func:`app.reduced.solve.converged`). It is computed on rank 0 of the run's communicator and shared.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from pathlib import Path
+
+from app import config, logging_setup
+from app.reduced.section import Section
+from app.reduced.solve import Estimate, Settings
+from app.reduced.transient import Resolution, TransientFailed
+
+SOLVER = "reduced-1d"
+
+
+def settings(cfg: dict) -> Settings:
+    r = cfg["reduced"]
+    res = Resolution(r["degree"], r["film_cells"], r["grading"], r["surface_grading"], r["step_change"],
+                     cfg["time"]["dt_max"],
+                     min(cfg["time"]["dt_initial"], 1e-3))
+    st = cfg["stability"]
+    return Settings(st["criterion"], st["tau"], cfg["time"]["end"], r["horizon"], r["max_wavenumber"], r["grid"], res)
+
+
+def _um(x):
+    return None if x is None else 1e3 * x
+
+
+def _crossing(c) -> dict | None:
+    if c is None:
+        return None
+    return {"mode_number": c.n, "wrinkle_count": c.wrinkles, "wavelength_mm": c.wavelength, "time": c.time,
+            "growth_um": _um(c.growth)}
+
+
+def summarize(est: Estimate, st: Settings, seconds: float) -> dict:
+    """The JSON block of a reduced answer (summary.json of ``reduced``; ``reduced`` in a 2D summary)."""
+    base = est.levels[0].curve if est.levels else None
+    v = est.value
+    if v is None:
+        kind = "stable"
+    elif v.n is None:
+        kind = "surface"  # the permeable surface first fails at short waves: no wavelength of its own
+    else:
+        kind = "wrinkles"
+    out = {
+        "solver": SOLVER,
+        "criterion": st.criterion,
+        "kind": kind,
+        "growth_um": _um(v.growth) if v else None,
+        "growth_error_um": _um(est.growth_error),
+        "time": v.time if v else None,
+        "time_error": est.time_error,
+        "mode_number": v.n if v else None,
+        "wrinkle_count": v.wrinkles if v else None,
+        "wavelength_mm": v.wavelength if v else None,
+        "error_parts_um": {k: (_um(x) if isinstance(x, float) else x) for k, x in est.parts.items()},
+        "first_finite_wavelength": _crossing(base.finite_minimum()) if base else None,
+        "short_wave_limit": _crossing(base.short_wave) if base else None,
+        "tested_mode_numbers": [1, base.n_max] if base else None,
+        "end_time": base.end_time if base else None,
+        "levels": [{"name": lev.name, "cells": lev.cells, "degree": lev.resolution.degree, "steps": len(lev.steps) - 1,
+                    "onset": _crossing(lev.onset()), "seconds": round(lev.seconds, 3)} for lev in est.levels],
+        "seconds": round(seconds, 3),
+    }
+    if kind == "surface":
+        out["where"] = "permeable surface"
+    return out
+
+
+def compute(cfg: dict) -> dict:
+    """The converged reduced answer of ``cfg`` as a summary block; NotReducible if it has none,
+    TransientFailed if the 1D transient cannot be continued."""
+    from app.reduced.solve import converged
+
+    st = settings(cfg)
+    t0 = time.perf_counter()
+    est = converged(Section.from_config(cfg), st)
+    block = summarize(est, st, time.perf_counter() - t0)
+    block["_estimate"] = est  # the caller's: margin curve and histories (removed before JSON)
+    return block
+
+
+def describe(block: dict) -> str:
+    """One line of a reduced answer."""
+    if block["kind"] == "stable":
+        return f"1D reduction ({block['criterion']}): stable up to t = {block['end_time']:.4g} s"
+    err = block["growth_error_um"]
+    bar = f" +- {err:.4f} um" if err is not None else ""
+    if block["kind"] == "surface":
+        ff = block["first_finite_wavelength"]
+        tail = (f"; the first finite wavelength: N = {ff['wrinkle_count']:g} at {ff['growth_um']:.4f} um"
+                if ff else "")
+        return (f"1D reduction ({block['criterion']}): the permeable surface is unstable at short waves (no "
+                f"wavelength of its own) from g = {block['growth_um']:.4f} um{bar} at t = {block['time']:.5f} s{tail}")
+    return (f"1D reduction ({block['criterion']}): g_c = {block['growth_um']:.4f} um{bar}, N_c = "
+            f"{block['wrinkle_count']:g} at t_c = {block['time']:.5f} s")
+
+
+def add_reduced(summary: dict, cfg: dict, comm) -> None:
+    """Pipeline step: a bilayer or circular-tube run's exact 1D counterpart, in ``summary["reduced"]``."""
+    log = logging_setup.get()
+    block = None
+    if comm.rank == 0:
+        try:
+            block = compute(cfg)
+            block.pop("_estimate")
+        except TransientFailed as err:
+            block = {"solver": SOLVER, "kind": "failed", "error": str(err)}
+    block = comm.bcast(block, root=0)
+    summary["reduced"] = block
+    if block["kind"] == "failed":
+        log.info(f"hydrobuckle: 1D reduction: failed ({block['error']}); the 2D answer is kept")
+        return
+    log.info("hydrobuckle: " + describe(block) + compare(summary))
+
+
+def compare(summary: dict) -> str:
+    """How the 2D onset stands against the reduced one, in its own error bars (for the log line)."""
+    red, c = summary.get("reduced") or {}, summary.get("critical") or {}
+    g2, g1 = c.get("growth_um"), red.get("growth_um")
+    if g2 is None or g1 is None:
+        return ""
+    err = (c.get("discretization_error") or {}).get("total_um")
+    d = g2 - g1
+    text = f"; 2D - 1D = {d:+.4f} um ({100 * d / g1:+.2f}%"
+    if err:
+        text += f", {abs(d) / err:.2f} of the 2D error bar"
+    text += ")"
+    if red["kind"] == "surface" and c.get("wrinkle_count") is not None:
+        text += ("; the 2D N_c is a finite wave after the surface's short-wave onset, which a mesh cannot "
+                 "resolve (docs/reduction.md)")
+    return text
+
+
+# --- the command ---------------------------------------------------------------------------------------
+
+
+def run(cfg: dict, outdir: Path) -> dict:
+    """``hydrobuckle reduced``: config.toml, margin.csv, history.csv, margin.png and summary.json (last)."""
+    outdir.mkdir(parents=True, exist_ok=True)
+    (outdir / "config.toml").write_text(config.dumps(cfg))
+    block = compute(cfg)
+    est = block.pop("_estimate")
+    _write_margin(outdir / "margin.csv", est)
+    _write_history(outdir / "history.csv", est)
+    try:
+        from app.io.plots import reduced_margin_plot
+
+        reduced_margin_plot(outdir / "margin.png", est, block)
+    except ImportError:  # pragma: no cover - matplotlib is a dependency
+        pass
+    summary = {"status": "buckled" if block["kind"] != "stable" else "stable", "solver": SOLVER, "reduced": block}
+    (outdir / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+    return summary
+
+
+def write_failure(outdir: Path, cfg: dict, message: str) -> None:
+    summary = {"status": "failed", "solver": SOLVER, "error": message}
+    (outdir / "summary.json").write_text(json.dumps(summary, indent=2))
+
+
+def _write_margin(path: Path, est: Estimate) -> None:
+    """Each located mode's first crossing (the base level), then the short-wave limit (n empty)."""
+    curve = est.levels[0].curve
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["mode_number", "wrinkle_count", "wavelength_mm", "time", "growth_um"])
+        for n in sorted(curve.modes):
+            c = curve.modes[n]
+            w.writerow([n, f"{c.wrinkles:g}", f"{c.wavelength:.8g}", f"{c.time:.10g}", f"{1e3 * c.growth:.10g}"])
+        if curve.short_wave is not None:
+            c = curve.short_wave
+            w.writerow(["", "", "0", f"{c.time:.10g}", f"{1e3 * c.growth:.10g}"])
+
+
+def _write_history(path: Path, est: Estimate) -> None:
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["time", "mu_bar", "growth_um", "lateral_stretch"])
+        for s in est.levels[0].steps:
+            w.writerow([f"{s.t:.10g}", f"{s.mu_bar:.10g}", f"{1e3 * s.growth:.10g}", f"{s.lam_x:.10g}"])
+
