@@ -10,6 +10,7 @@ SWELLING = {
     "mesh": {"element_size": 0.005, "film_layers": 2, "substrate_grading": 1.25},
     "time": {"end": 1.0, "dt_initial": 0.001, "dt_max": 0.05},
     "output": {"fields": False, "plot": False},
+    "reduced": {"beside_2d": False},  # tests/test_reduction.py tests the 1D counterpart
 }
 
 
@@ -24,6 +25,7 @@ SMALL_TUBE = {
     "material": {"film": {"modulus_ratio": 10.0}},
     "time": {"end": 1.0, "dt_initial": 0.001, "dt_max": 0.05},
     "output": {"fields": False, "plot": False},
+    "reduced": {"beside_2d": False},
 }
 
 
@@ -56,6 +58,8 @@ error_estimate = false
 fields = false
 plot = false
 checkpoint_every = 10
+[reduced]
+beside_2d = false
 """
 
 
@@ -69,4 +73,6 @@ film_thickness = 0.01
 element_size = 0.01
 film_layers = 2
 substrate_grading = 1.25
+[reduced]
+beside_2d = false
 """

@@ -55,6 +55,7 @@ def small_bilayer(**overrides) -> dict:
         "mesh": {"element_size": 0.01, "film_layers": 2, "substrate_grading": 1.3},
         "time": {"end": 0.3, "dt_initial": 0.01, "dt_max": 0.1},
         "output": {"fields": False, "plot": False},
+        "reduced": {"beside_2d": False},  # tests/test_reduction.py tests the 1D counterpart
     }
     return config.resolve(user, [f"{k}={v}" for k, v in overrides.items()])
 

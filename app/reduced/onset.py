@@ -203,20 +203,36 @@ class Locator:
         return lambda i: self.pencil(i).definite(k)
 
     def crossing(self, n: int | None, i: int) -> Crossing:
-        """Interpolated crossing of mode n between steps i - 1 (definite) and i (indefinite)."""
+        """Crossing of mode n between steps i - 1 (definite) and i (indefinite): the root of the quadratic
+        through the mode's margin at steps i - 2, i - 1, i (linear at the first step), and the growth
+        interpolated the same way."""
         sec = self.stab.model.section
+        idx = [j for j in (i - 2, i - 1, i) if j >= 0]
         if n is None:
-            m0, m1 = self.surface(i - 1).margin(1.0), self.surface(i).margin(1.0)
+            m = [self.surface(j).margin(1.0) for j in idx]
         else:
             k = sec.wavenumber(n)
-            m0, m1 = self.pencil(i - 1).margin(k), self.pencil(i).margin(k)
-        a, b = self.steps[i - 1], self.steps[i]
-        f = 1.0 if m0 == m1 else min(max(m0 / (m0 - m1), 0.0), 1.0)
-        t = a.t + f * (b.t - a.t)
-        g = a.growth + f * (b.growth - a.growth)
+            m = [self.pencil(j).margin(k) for j in idx]
+        ts = [self.steps[j].t for j in idx]
+        gs = [self.steps[j].growth for j in idx]
+        t = interpolated_root(ts, m)
+        g = float(np.polyval(np.polyfit(ts, gs, len(ts) - 1), t))
         if n is None:
             return Crossing(None, t, g)
         return Crossing(n, t, g, sec.wrinkle_count(n), 2 * math.pi / sec.local_wavenumber(n))
+
+
+def interpolated_root(ts: list[float], margins: list[float]) -> float:
+    """The zero of the polynomial through (t, margin) (2 or 3 points) between the last two times, where the
+    margin changes sign; the linear root if the quadratic has none there."""
+    a, b = ts[-2], ts[-1]
+    m0, m1 = margins[-2], margins[-1]
+    lin = a if m0 == m1 else a + (b - a) * min(max(m0 / (m0 - m1), 0.0), 1.0)
+    if len(ts) < 3:
+        return lin
+    roots = np.roots(np.polyfit(ts, margins, 2))
+    inside = [float(r.real) for r in roots if abs(r.imag) < 1e-12 * max(1.0, abs(r.real)) and a <= r.real <= b]
+    return min(inside, key=lambda r: abs(r - lin)) if inside else lin
 
 
 def margin_curve(stab: Stability, steps: list[Snapshot], screen: Screen, span: float = 3.0,

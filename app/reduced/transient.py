@@ -251,6 +251,8 @@ class Transient:
                 return False
             w += dw
             self.newton_its += 1
+            if np.max(np.abs(dw)) <= 1e-13 * (np.max(np.abs(w)) + m.section.film_thickness):
+                break  # the update is at roundoff: the residual cannot fall further
         else:
             return False
         st = m.state.x.array
