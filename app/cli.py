@@ -311,7 +311,19 @@ def _study_options(p) -> None:
                    help="estimate each case's discretization error (two coarsened companion runs per case)")
     p.add_argument("--isomodes", action=argparse.BooleanOptionalAction, default=None,
                    help="continue past the onset and record later crossings (isomode curves)")
+    p.add_argument("--reduced", action="store_true",
+                   help="every case by the exact 1D reduction (bilayer and circular tube; seconds per case, one "
+                        "rank per case; default directory results/<name>-reduced)")
     p.add_argument("-q", "--quiet", action="store_true")
+
+
+def _check_reducible(cases) -> None:
+    from app.reduced.section import reducible
+
+    for c in cases:
+        why = reducible(c.cfg)
+        if why:
+            raise config.ConfigError("--reduced", f"case {c.label}: {why}")
 
 
 def _parse_values(text: str) -> list:
@@ -345,18 +357,26 @@ def cmd_reduced(args) -> int:
     from app.reduced.transient import TransientFailed
     from app.workflows import reduced
 
+    from app import interrupt
+    from app.reduced.solve import Interrupted
+
     log = logging_setup.get()
     code = EXIT_OK
-    if comm.rank == 0:  # a 1D problem: one rank computes, the others wait
-        try:
-            summary = reduced.run(cfg, outdir)
-            log.info("hydrobuckle: result: " + reduced.describe(summary["reduced"]) + f" ({outdir}, "
-                     f"{summary['reduced']['seconds']:.1f} s)")
-        except TransientFailed as err:
-            reduced.write_failure(outdir, cfg, str(err))
-            log.error(f"hydrobuckle: the 1D transient failed: {err}; summary.json says so")
-            code = EXIT_SOLVER
-    return comm.bcast(code, root=0)
+    with interrupt.Watch(comm):
+        if comm.rank == 0:  # a 1D problem: one rank computes, the others wait
+            try:
+                summary = reduced.run(cfg, outdir, stop=lambda: interrupt._received != 0)
+                log.info("hydrobuckle: result: " + reduced.describe(summary["reduced"]) + f" ({outdir}, "
+                         f"{summary['reduced']['seconds']:.1f} s)")
+            except TransientFailed as err:
+                reduced.write_failure(outdir, cfg, str(err))
+                log.error(f"hydrobuckle: the 1D transient failed: {err}; summary.json says so")
+                code = EXIT_SOLVER
+            except Interrupted as err:
+                log.error(f"hydrobuckle: interrupted ({err}): {outdir} has no summary.json")
+        code = comm.bcast(code, root=0)
+        interrupt.pending(comm)  # the exit code of a signal (130 / 143), agreed by every rank
+    return code
 
 
 def cmd_study(args) -> int:
@@ -376,10 +396,12 @@ def cmd_study(args) -> int:
     if args.name not in studies.STUDIES:
         return _input_error(comm, config.ConfigError("study", f"{args.name!r} is unknown; allowed: "
                                                      + ", ".join(studies.STUDIES)))
-    outdir = Path(args.output) if args.output else Path("results") / args.name
+    outdir = Path(args.output) if args.output else Path("results") / (args.name + ("-reduced" if args.reduced else ""))
     try:
         values = _parse_values(args.values) if args.values else None
         spec, cases = studies.study_cases(args.name, outdir, values, args.set, args.error_estimate, args.isomodes)
+        if args.reduced:
+            _check_reducible(cases)
         _check_mesh_sizes([c.cfg for c in cases], [f"case {c.label}" for c in cases])
         _check_ranks(args, comm)
         _check_geometry([c.cfg for c in cases], comm, [c.label for c in cases])
@@ -394,7 +416,8 @@ def _run_study(studies, comm, outdir, cases, title, param, args) -> int:
     from app.io.writes import ResultWriteError
 
     try:
-        rows = studies.run_study(cases, outdir, comm, title, param, args.ranks_per_case, args.force)
+        rows = studies.run_study(cases, outdir, comm, title, param, args.ranks_per_case, args.force,
+                                 "reduced" if args.reduced else "2d")
     except ResultWriteError as err:
         return _input_error(comm, err)
     return _study_exit(rows, outdir, comm)
@@ -404,7 +427,8 @@ def cmd_sweep(args) -> int:
     from app.workflows import studies
 
     comm = _comm()
-    outdir = Path(args.output) if args.output else Path("results") / (Path(args.config).stem + "-sweep")
+    outdir = Path(args.output) if args.output else Path("results") / (
+        Path(args.config).stem + ("-sweep-reduced" if args.reduced else "-sweep"))
     try:
         _no_resume(args)
         values = _parse_values(args.values)
@@ -416,6 +440,8 @@ def cmd_sweep(args) -> int:
         config.set_dotted(config.defaults(), args.param, values[0])  # the key must exist
         cases = studies.build_cases(user, args.param, values, outdir, args.set, isomodes=bool(args.isomodes),
                                     error_estimate=args.error_estimate)
+        if args.reduced:
+            _check_reducible(cases)
         _check_mesh_sizes([c.cfg for c in cases], [f"case {c.label}" for c in cases])
         _check_ranks(args, comm)
         _check_geometry([c.cfg for c in cases], comm, [c.label for c in cases])

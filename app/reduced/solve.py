@@ -60,19 +60,36 @@ def n_max(section: Section, max_wavenumber: float) -> int:
     return max(2, int(math.ceil(k * section.surface)))
 
 
+class Interrupted(RuntimeError):
+    """A computation stopped by its ``stop`` callable (a signal)."""
+
+
 def compute(section: Section, st: Settings, resolution: Resolution | None = None, schedule=None,
-            time_scale: int = 1, name: str = "base") -> Level:
+            time_scale: int = 1, name: str = "base", stop=None) -> Level:
+    """One transient and its margin curve; ``stop()`` true after a step raises :class:`Interrupted`."""
     res = resolution or st.resolution
     t0 = time.perf_counter()
     model = LayeredModel(section, res)
     stab = Stability(model, st.criterion, st.tau)
     screen = Screen(stab, mode_grid(n_max(section, st.max_wavenumber), st.grid), st.horizon, st.t_end)
     tr = Transient(model)
-    tr.run(st.t_end, stop=screen, scale=time_scale, schedule=schedule)
+
+    def step_done(snap, index):
+        if stop is not None and stop():
+            raise Interrupted(f"stopped at t = {snap.t:.6g} s")
+        return screen(snap, index)
+
+    tr.run(st.t_end, stop=step_done, scale=time_scale, schedule=schedule)
     curve = margin_curve(stab, tr.steps, screen)
     lev = Level(name, res, time_scale, curve, tr.steps, time.perf_counter() - t0, tr.newton_its)
     lev._cells = len(model.nodes) - 1
     return lev
+
+
+def compile_forms(section: Section, st: Settings) -> None:
+    """Build (and so JIT-compile) every form a computation of ``section`` under ``st`` uses."""
+    model = LayeredModel(section, st.resolution)
+    Stability(model, st.criterion, st.tau)
 
 
 @dataclass
@@ -86,14 +103,14 @@ class Estimate:
     levels: list[Level] = field(default_factory=list)
 
 
-def converged(section: Section, st: Settings) -> Estimate:
+def converged(section: Section, st: Settings, stop=None) -> Estimate:
     """Three levels: the base (adaptive steps), the same steps halved (Richardson in time: backward Euler
     is first order), the mesh refined once. The answer is the time-extrapolated base value; its error bar
     combines the time extrapolation's size (the halved-step error) and the mesh change."""
-    base = compute(section, st)
+    base = compute(section, st, stop=stop)
     sched = [b.t - a.t for a, b in zip(base.steps, base.steps[1:])]
-    halved = compute(section, st, schedule=sched, time_scale=2, name="time")
-    finer = compute(section, st, resolution=st.resolution.refined(1), schedule=sched, name="mesh")
+    halved = compute(section, st, schedule=sched, time_scale=2, name="time", stop=stop)
+    finer = compute(section, st, resolution=st.resolution.refined(1), schedule=sched, name="mesh", stop=stop)
     levels = [base, halved, finer]
     c0, c1, c2 = (lev.onset() for lev in levels)
     if c0 is None or c1 is None or c2 is None:

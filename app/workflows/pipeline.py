@@ -20,7 +20,7 @@ def after_run_steps(cfg: dict, outdir, comm) -> list:
     steps = []
     if cfg["stability"]["error_estimate"]:
         steps.append(lambda summary: add_error_estimate(summary, cfg, outdir, comm))
-    if cfg["reduced"]["beside_2d"] and not reducible(cfg):
+    if cfg["reduced"]["beside_2d"] and cfg["stability"]["enabled"] and not reducible(cfg):
         steps.append(lambda summary: add_reduced(summary, cfg, comm))
     return steps
 

@@ -16,6 +16,7 @@ from pathlib import Path
 from app import config, logging_setup
 from app.reduced.section import Section
 from app.reduced.solve import Estimate, Settings
+from app.reduced.solve import Interrupted
 from app.reduced.transient import Resolution, TransientFailed
 
 SOLVER = "reduced-1d"
@@ -76,15 +77,23 @@ def summarize(est: Estimate, st: Settings, seconds: float) -> dict:
     return out
 
 
-def compute(cfg: dict) -> dict:
+ISOMODES = 12  # earliest mode crossings a study row lists (its isomode curves)
+
+
+def compute(cfg: dict, stop=None) -> dict:
     """The converged reduced answer of ``cfg`` as a summary block; NotReducible if it has none,
-    TransientFailed if the 1D transient cannot be continued."""
+    TransientFailed if the 1D transient cannot be continued, Interrupted once ``stop()`` is true."""
     from app.reduced.solve import converged
 
     st = settings(cfg)
     t0 = time.perf_counter()
-    est = converged(Section.from_config(cfg), st)
+    est = converged(Section.from_config(cfg), st, stop=stop)
     block = summarize(est, st, time.perf_counter() - t0)
+    section = Section.from_config(cfg)
+    block["mu_bar"] = section.loading.mu_bar(block["time"]) if block["time"] is not None else None
+    curve = est.levels[0].curve
+    early = sorted(curve.modes.values(), key=lambda c: c.time)[:ISOMODES]
+    block["isomodes"] = [(c.wrinkles, 1e3 * c.growth) for c in early]
     block["_estimate"] = est  # the caller's: margin curve and histories (removed before JSON)
     return block
 
@@ -106,19 +115,34 @@ def describe(block: dict) -> str:
 
 
 def add_reduced(summary: dict, cfg: dict, comm) -> None:
-    """Pipeline step: a bilayer or circular-tube run's exact 1D counterpart, in ``summary["reduced"]``."""
+    """Pipeline step: a bilayer or circular-tube run's exact 1D counterpart, in ``summary["reduced"]``
+    (not after an interrupted or failed run). A SIGINT/SIGTERM while it is computed ends it: the run's
+    summary is written without it (``reduced.kind = "interrupted"``) and the command exits 130/143."""
+    from app import interrupt
+
+    if summary["status"] in ("interrupted", "failed"):
+        return
     log = logging_setup.get()
+    log.info("hydrobuckle: computing the exact 1D counterpart (reduced.beside_2d; about 10 s)")
     block = None
-    if comm.rank == 0:
-        try:
-            block = compute(cfg)
-            block.pop("_estimate")
-        except TransientFailed as err:
-            block = {"solver": SOLVER, "kind": "failed", "error": str(err)}
-    block = comm.bcast(block, root=0)
+    with interrupt.Watch(comm):
+        if comm.rank == 0:
+            try:
+                block = compute(cfg, stop=lambda: interrupt._received != 0)
+                block.pop("_estimate")
+            except TransientFailed as err:
+                block = {"solver": SOLVER, "kind": "failed", "error": str(err)}
+            except Interrupted:
+                block = {"solver": SOLVER, "kind": "interrupted"}
+        block = comm.bcast(block, root=0)
+        if interrupt.pending(comm):  # collective: the CLI's exit code says which signal
+            block = {"solver": SOLVER, "kind": "interrupted"}
     summary["reduced"] = block
     if block["kind"] == "failed":
         log.info(f"hydrobuckle: 1D reduction: failed ({block['error']}); the 2D answer is kept")
+        return
+    if block["kind"] == "interrupted":
+        log.info("hydrobuckle: 1D reduction: interrupted; the 2D answer is kept")
         return
     log.info("hydrobuckle: " + describe(block) + compare(summary))
 
@@ -144,11 +168,11 @@ def compare(summary: dict) -> str:
 # --- the command ---------------------------------------------------------------------------------------
 
 
-def run(cfg: dict, outdir: Path) -> dict:
+def run(cfg: dict, outdir: Path, stop=None) -> dict:
     """``hydrobuckle reduced``: config.toml, margin.csv, history.csv, margin.png and summary.json (last)."""
     outdir.mkdir(parents=True, exist_ok=True)
     (outdir / "config.toml").write_text(config.dumps(cfg))
-    block = compute(cfg)
+    block = compute(cfg, stop=stop)
     est = block.pop("_estimate")
     _write_margin(outdir / "margin.csv", est)
     _write_history(outdir / "history.csv", est)

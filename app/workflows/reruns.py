@@ -14,15 +14,16 @@ from app import config
 COMPLETE = ("buckled", "stable", "equilibrium")  # statuses of a finished run (a rerun keeps it)
 
 
-def finished(cfg: dict, outdir) -> dict | None:
+def finished(cfg: dict, outdir, solver: str = "2d") -> dict | None:
     """The summary of a finished run of exactly ``cfg`` in ``outdir`` (its config.toml equal to ``cfg``,
-    a status in :data:`COMPLETE`), else None."""
+    a status in :data:`COMPLETE`, by ``solver``: "2d", or "reduced" for the exact 1D reduction), else None."""
     summary, cfg_file = Path(outdir) / "summary.json", Path(outdir) / "config.toml"
     if not summary.is_file() or not cfg_file.is_file():
         return None
     try:
         s = json.loads(summary.read_text())
-        return s if s.get("status") in COMPLETE and config.load(cfg_file) == cfg else None
+        by = "reduced" if s.get("solver") == "reduced-1d" else "2d"
+        return s if s.get("status") in COMPLETE and by == solver and config.load(cfg_file) == cfg else None
     except (ValueError, OSError, config.ConfigError):
         return None
 

@@ -137,12 +137,13 @@ def _toml(v) -> str:
     return repr(v)
 
 
-def is_complete(case: Case) -> bool:
-    return finished(case.cfg, case.outdir) is not None
+def is_complete(case: Case, solver: str = "2d") -> bool:
+    return finished(case.cfg, case.outdir, solver) is not None
 
 
-def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = False) -> None:
-    """Run every case (skipping complete ones) on groups of ``ranks_per_case`` ranks. A case with a
+def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = False, solver: str = "2d") -> None:
+    """Run every case (skipping complete ones) on groups of ``ranks_per_case`` ranks (``solver`` "reduced":
+    each case's exact 1D reduction, one rank per case). A case with a
     checkpoint of its config (an interrupted or killed case) continues from it, unless ``force`` (every
     case anew). After SIGINT/SIGTERM each group stops once its current case has stopped: the cases
     it has not started are left without a directory. A result file that cannot be written (a full
@@ -153,7 +154,7 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
     from app.workflows.pipeline import run_case
 
     log = logging_setup.get()
-    k = max(1, min(ranks_per_case, comm.size))
+    k = 1 if solver == "reduced" else max(1, min(ranks_per_case, comm.size))
     n_groups = comm.size // k
     color = comm.rank // k if comm.rank < n_groups * k else n_groups  # leftover ranks idle
     sub = comm.Split(color, comm.rank)
@@ -167,9 +168,14 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
                 if sub.rank == 0:
                     log.info(f"study: interrupted: {case.label} and the group's later cases not started")
                 break
-            if not force and is_complete(case):
+            if not force and is_complete(case, solver):
                 if sub.rank == 0:
                     log.info(f"study: {case.label}: complete, skipped")
+                continue
+            if solver == "reduced":
+                t0 = time.perf_counter()
+                _run_reduced(case, log)
+                log.info(f"study: {case.label}: 1D reduction done in {time.perf_counter() - t0:.1f} s")
                 continue
             resume = None if force else _checkpoint(case, sub, log)
             if sub.rank == 0:
@@ -207,13 +213,30 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
         raise ResultWriteError(*first)
 
 
+def _run_reduced(case: Case, log) -> None:
+    """One case's exact 1D reduction into its directory (summary.json last); a transient that fails leaves
+    error.txt and a failed summary, the other cases go on."""
+    from app.reduced.solve import Interrupted
+    from app.reduced.transient import TransientFailed
+    from app.workflows import reduced
+
+    try:
+        reduced.run(case.cfg, case.outdir, stop=lambda: interrupt._received != 0)
+    except Interrupted:
+        log.info(f"study: {case.label}: interrupted (no summary.json)")
+    except TransientFailed as err:
+        log.info(f"study: {case.label}: the 1D transient failed: {err}")
+        reduced.write_failure(case.outdir, case.cfg, str(err))
+        (case.outdir / "error.txt").write_text(f"TransientFailed: {err}\n")
+
+
 def _checkpoint(case: Case, comm, log):
     """The case directory's checkpoint if its config may resume it (else None, with the reason logged)."""
     return resumable(case.cfg, case.outdir, comm, log, f"study: {case.label}")
 
 
 COLUMNS = ("series", "parameter", "value", "status", "g_c_um", "g_c_error_um", "N_c", "t_c", "mu_c",
-           "crossings", "wall_time_s", "directory")
+           "crossings", "wall_time_s", "directory", "solver", "onset")
 
 
 def collect(cases: list[Case], param: str) -> list[dict]:
@@ -221,9 +244,11 @@ def collect(cases: list[Case], param: str) -> list[dict]:
     for case in cases:
         row = {"series": case.series, "parameter": param, "value": case.value, "status": "missing",
                "g_c_um": None, "g_c_error_um": None, "N_c": None, "t_c": None, "mu_c": None, "crossings": "",
-               "wall_time_s": None, "directory": case.outdir.name}
+               "wall_time_s": None, "directory": case.outdir.name, "solver": "2d", "onset": None}
         f = case.outdir / "summary.json"
-        if f.is_file():
+        if f.is_file() and json.loads(f.read_text()).get("solver") == "reduced-1d":
+            row.update(_reduced_row(json.loads(f.read_text())))
+        elif f.is_file():
             s = json.loads(f.read_text())
             crit = s.get("critical") or {}
             est = crit.get("discretization_error") or {}
@@ -232,11 +257,21 @@ def collect(cases: list[Case], param: str) -> list[dict]:
                        N_c=crit.get("wrinkle_count"), t_c=crit.get("time"), mu_c=crit.get("mu_bar"),
                        crossings=";".join(f"{c['first_mode_wrinkle_count']:g}@{c['growth_um']:.5g}"
                                           for c in crossings),
-                       wall_time_s=s.get("wall_time_s"))
+                       wall_time_s=s.get("wall_time_s"), onset="wrinkles" if crit else None)
         elif (case.outdir / "error.txt").is_file():
             row["status"] = "failed"
         rows.append(row)
     return rows
+
+
+def _reduced_row(s: dict) -> dict:
+    """A study row from a reduced case's summary: its onset ("wrinkles", or "surface": the permeable surface
+    unstable at short waves, no N_c) and, as crossings, the earliest mode crossings of its margin curve."""
+    red = s.get("reduced") or {}
+    return {"status": s["status"], "solver": "reduced-1d", "onset": red.get("kind"), "g_c_um": red.get("growth_um"),
+            "g_c_error_um": red.get("growth_error_um"), "N_c": red.get("wrinkle_count"), "t_c": red.get("time"),
+            "mu_c": red.get("mu_bar"), "wall_time_s": red.get("seconds"),
+            "crossings": ";".join(f"{n:g}@{g:.5g}" for n, g in red.get("isomodes", []))}
 
 
 def write_tables(rows: list[dict], outdir: Path, title: str, param: str) -> None:
@@ -263,10 +298,10 @@ def write_tables(rows: list[dict], outdir: Path, title: str, param: str) -> None
 
 
 def run_study(cases: list[Case], outdir: Path, comm, title: str, param: str, ranks_per_case: int = 1,
-              force: bool = False) -> list[dict]:
+              force: bool = False, solver: str = "2d") -> list[dict]:
     from app.io import writes
 
-    run_cases(cases, comm, ranks_per_case, force)
+    run_cases(cases, comm, ranks_per_case, force, solver)
     rows = collect(cases, param) if comm.rank == 0 else None
 
     def tables():
