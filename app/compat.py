@@ -45,6 +45,12 @@ def mixed_lagrange_space(domain, degree: int, count: int):
     return fem.FunctionSpace(domain, ufl.MixedElement([el] * count))
 
 
+def mixed_dg0_space(domain, count: int):
+    """``count`` cell-wise constant scalar fields in one mixed space."""
+    el = ufl.FiniteElement("DG", domain.ufl_cell(), 0)
+    return fem.FunctionSpace(domain, ufl.MixedElement([el] * count))
+
+
 def interval_mesh(comm, nodes: np.ndarray):
     """A 1D mesh whose vertices are the increasing coordinates ``nodes`` (a graded interval)."""
     nodes = np.asarray(nodes, dtype=float)

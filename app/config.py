@@ -78,6 +78,10 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
                           "which perturbations count: drained (fluid may redistribute; any growing mode), "
                           "undrained (fluid frozen) or rate (K with stability.tau)"),
         "tau": _key(float, 1.0e-2, _gt(0), "criterion = rate only: step of the dissipation block of K [s]"),
+        "surface_check": _key(bool, True, None,
+                              "check the permeable surface's short-wave limit every step from the local state: "
+                              "reports where and when it becomes unstable at waves below the mesh "
+                              "(summary.json surface_onset, docs/reduction.md)"),
         "screening": _key(str, "newton", _one_of("newton", "exact"),
                           "per-step test: inertia of the Newton factor (confirmed exactly) or exact K"),
         "max_crossings": _key(int, 20, _ge(1), "with stop_at_onset = false: stop after this many"),

@@ -26,7 +26,8 @@ from app import compat, config
 from app.model import theory
 from app.model.hydrogel import HYDROGEL
 from app.model.problem import layer_materials
-from app.reduced.onset import HalfSpace, Screen, Stability, margin_curve, mode_grid
+from app.reduced.halfspace import HalfSpace
+from app.reduced.onset import Screen, Stability, margin_curve, mode_grid
 from app.reduced.section import Section
 from app.reduced.solve import compute, n_max
 from app.reduced.transient import LayeredModel, Resolution, Transient
@@ -48,7 +49,7 @@ def test_short_wave_limit_is_the_homogeneous_layers_surface_condition(gamma, cri
     hs = HalfSpace(mat, criterion)
 
     def margin(lam):
-        return hs.pencil(1.0, lam, theory.constrained_layer_fluid(mat, lam)).margin(1.0)
+        return hs.margin(((1.0, 0.0), (0.0, lam)), theory.constrained_layer_fluid(mat, lam))
 
     lam = brentq(margin, 2.0, theory.BIOT_CUBIC_RATIO - 1e-3, xtol=1e-12)
     assert lam == pytest.approx(theory.surface_critical_stretch(mat, drained=criterion == "drained"), rel=1e-6)

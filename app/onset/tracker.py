@@ -11,6 +11,8 @@ stepper at the state the run continues from. With ``stability.enabled = false`` 
 
 from __future__ import annotations
 
+import numpy as np
+
 from dataclasses import dataclass
 
 from app.onset.bisection import Bisection
@@ -33,6 +35,7 @@ class StabilitySettings:
     error_estimate: bool = False  # companion runs after the run (app.workflows.error_estimate)
     criterion: str = "drained"  # which Hessian decides stability (app.solvers.stability)
     imperfection: float = 0.01  # after_onset = branch: the mode's surface amplitude / film thickness
+    surface_check: bool = True  # the permeable surface's short-wave limit every step (app.onset.surface)
 
     @classmethod
     def from_config(cls, cfg: dict) -> StabilitySettings:
@@ -40,7 +43,7 @@ class StabilitySettings:
         return cls(s["enabled"], s["tolerance"],
                    CrossingPolicy.from_flags(s["stop_at_onset"], s["max_crossings"], s.get("after_onset")),
                    s["modes"], s["eigen_every"], s["tau"], s["screening"], s["error_estimate"], s["criterion"],
-                   s.get("imperfection", 0.01))
+                   s.get("imperfection", 0.01), s.get("surface_check", True))
 
     def newton_screen_valid(self, dt: float) -> bool:
         """Whether the Newton factor of a step of size dt (K_dt) has at least the criterion's negative
@@ -85,6 +88,13 @@ class OnsetTracker:
         self.limits: dict = {}  # the other criteria's verdicts at the first crossing's unstable end
         self.branch = None  # app.onset.branching.BranchSwitcher with after_onset = "branch"
         self.restabilized: list[dict] = []  # on a branch: where the negative count fell
+        self.surface = None  # app.onset.surface.SurfaceCheck: the permeable surface's short-wave limit
+        self.surface_onset: dict | None = None
+        if settings.surface_check and problem.diffusion and problem.loading.surface_term \
+                and problem.geo.facets_with_role("permeable"):
+            from app.onset.surface import SurfaceCheck
+
+            self.surface = SurfaceCheck(problem, settings.criterion)
         if settings.policy.branches:
             from app.onset.branching import BranchSwitcher, typical_cell_size
 
@@ -95,10 +105,23 @@ class OnsetTracker:
         """The initial state's exact count, recorded with it."""
         self.count = self.screen.start()
         rec.extra.update({"negative_eigenvalues": self.count, "lambda_min": float("nan")})
+        self._test_surface(rec)
+
+    def _test_surface(self, rec) -> None:
+        """The permeable surface's short-wave limit at this state, until it first fails (on the unbuckled path)."""
+        if self.surface is None or self.surface_onset is not None or self.stepper.minimizing:
+            return
+        onset = self.surface.test(rec.time, rec.growth_mm)
+        if onset is not None:
+            self.surface_onset = onset
+            x, y = onset["where"]
+            self.log(f"  the permeable surface became unstable at short waves (below the mesh): t = "
+                     f"{onset['time']:.6f} s, growth = {onset['growth_um']:.4f} um, at ({x:.4g}, {y:.4g}) mm")
 
     def test(self, rec) -> None:
         """The verdict on the step just accepted, recorded in ``rec``; a confirmed increase is kept
         for :meth:`resolve`."""
+        self._test_surface(rec)
         nneg = self.screen.screen()
         self._bracket = None
         if nneg < self.count and self.stepper.minimizing:  # on a branch the state can become stable again
@@ -197,6 +220,9 @@ class OnsetTracker:
             if c else {}
         if len(c) > 1 or (c and self.settings.policy.after is not AfterCrossing.STOP):
             out["crossings"] = [x.as_dict() for x in c]
+        if self.surface_onset is not None:
+            out["surface_onset"] = {**self.surface_onset,
+                                    "before_critical": not c or self.surface_onset["time"] < c[0].time}
         return out
 
     def branch_summary(self) -> dict:
@@ -235,13 +261,27 @@ class OnsetTracker:
         return {"count": self.count, "crossings": list(self.crossings), "exact_tests": self.analyzer.tests,
                 "screen": self.screen.export_state(), "limits": dict(self.limits),
                 "branch": {**self.branch.export_state(), "restabilized": list(self.restabilized)}
-                if self.branch is not None else None}
+                if self.branch is not None else None,
+                "ranks": self.problem.comm.size,
+                "surface": {"onset": self.surface_onset,
+                            "history": [(t, g, m, c.tolist()) for t, g, m, c in self.surface.history]}
+                if self.surface is not None else None}
+
+    def comm_size_matches(self, state: dict) -> bool:
+        return state.get("ranks") == self.problem.comm.size
 
     def import_state(self, state: dict) -> None:
         self.count, self.crossings = state["count"], list(state["crossings"])
         self.analyzer.tests = state["exact_tests"]
         self.screen.import_state(state["screen"])
         self.limits = dict(state.get("limits", {}))
+        surface = state.get("surface")
+        if surface and self.surface is not None:
+            self.surface_onset = surface["onset"]
+            history = [(t, g, m, np.asarray(c, dtype=float)) for t, g, m, c in surface["history"]]
+            # the columns are per facet of this rank: a resume on another partition starts the check afresh
+            fits = all(len(c) == len(self.surface.facets) for *_, c in history)
+            self.surface.history = history if fits and self.comm_size_matches(state) else []
         branch = state.get("branch")
         if branch and self.branch is not None:
             self.branch.import_state(branch)

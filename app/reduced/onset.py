@@ -17,6 +17,7 @@ import ufl
 from mpi4py import MPI
 
 from app import compat
+from app.reduced.halfspace import HalfSpace
 from app.reduced.modes import BandedPencil, ModeOperator
 from app.reduced.transient import LayeredModel, Snapshot
 
@@ -33,27 +34,6 @@ class Crossing:
 
     def as_dict(self) -> dict:
         return asdict(self)
-
-
-class HalfSpace:
-    """The short-wave limit: a homogeneous half-space in the surface's local state (tangential stretch,
-    normal stretch, fluid content), traction-free, in a mode of unit wavenumber. Its depth is in units of
-    the wavelength / 2 pi, so one operator stands for every wavenumber; clamped at ``depth``, where such a
-    mode has decayed. Under the rate criterion the dissipation is negligible against the k^2 terms at short
-    waves, so the limit is the drained one."""
-
-    def __init__(self, mat, criterion: str, degree: int = 3, depth: float = 40.0, cells: int = 96):
-        nodes = -depth * (np.linspace(1.0, 0.0, cells + 1) ** 2)
-        self.domain = compat.interval_mesh(MPI.COMM_SELF, nodes)
-        d = self.domain
-        self.lt, self.ln, self.s = (compat.Constant(d, compat.ScalarType(v)) for v in (1.0, 1.0, mat.s0))
-        F0 = ufl.as_matrix([[self.lt, 0.0], [0.0, self.ln]])
-        crit = "drained" if criterion == "rate" else criterion
-        self.op = ModeOperator(d, "planar", degree, F0, self.s, mat, crit, held={0: -depth, 1: -depth})
-
-    def pencil(self, lt: float, ln: float, s: float) -> BandedPencil:
-        self.lt.value, self.ln.value, self.s.value = lt, ln, s
-        return self.op.polynomial()
 
 
 class Stability:
@@ -90,7 +70,9 @@ class Stability:
         return tuple(float(compat.assemble_scalar(f, MPI.COMM_SELF)) for f in self._surface)
 
     def surface_pencil(self, snap: Snapshot) -> BandedPencil:
-        return self.half.pencil(*self.surface_state(snap))
+        """The short-wave limit at the surface's state, as a pencil constant in k (test it at k = 1)."""
+        lt, ln, s = self.surface_state(snap)
+        return BandedPencil([self.half.band(((lt, 0.0), (0.0, ln)), s), 0.0, 0.0])
 
 
 def mode_grid(n_max: int, count: int) -> list[int]:

@@ -159,6 +159,10 @@ def compare(summary: dict) -> str:
     if err:
         text += f", {abs(d) / err:.2f} of the 2D error bar"
     text += ")"
+    if err and abs(d) > err + (red.get("growth_error_um") or 0.0):
+        text += ("; the exact 1D value lies outside the 2D error bar: the 2D mesh misses something its "
+                 "companion runs do not show (a thick film's surface diffusion layer: try mesh.film_grading "
+                 "or more mesh.film_layers; docs/reduction.md section 5)")
     if red["kind"] == "surface" and c.get("wrinkle_count") is not None:
         text += ("; the 2D N_c is a finite wave after the surface's short-wave onset, which a mesh cannot "
                  "resolve (docs/reduction.md)")

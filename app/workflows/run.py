@@ -176,6 +176,14 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         c = tracker.crossings[0]
         log.info(f"hydrobuckle: critical growth g_c = {1e3 * c.growth_mm:.4f} um at t_c = {c.time:.6f} s, "
                  f"wrinkle count N_c = {c.wrinkle_count:g}")
+    so = summary.get("surface_onset")
+    if so is not None:
+        x, y = so["where"]
+        first = ("before the onset above: that N_c is a wave this mesh resolves, after the surface's own "
+                 "instability, which has no wavelength of its own" if tracker.crossings and so["before_critical"]
+                 else "after the onset above" if tracker.crossings else "(K itself stayed positive definite)")
+        log.info(f"hydrobuckle: the permeable surface is unstable at short waves (below the mesh) from t = "
+                 f"{so['time']:.6f} s, growth = {so['growth_um']:.4f} um, at ({x:.4g}, {y:.4g}) mm, {first}")
     try:
         for step in after if writer.error is None else ():
             step(summary)

@@ -1,0 +1,240 @@
+"""The short-wave limit of the permeable surface, checked every step from the 2D run's local state.
+
+A 2D mesh resolves no wave shorter than a few elements, so a surface that becomes unstable at short
+wavelengths (a swelling gel's free surface passing Kang & Huang's condition, docs/theory/drained-onset.md)
+is invisible to K, or shows up as a wave at the mesh's scale. The check evaluates, after every accepted
+step, the half-space operator of app/reduced/halfspace.py at every permeable facet, under the run's
+criterion (its short-wave limit: rate counts as drained).
+
+The state it needs is that of the surface itself, which no mesh resolves: under the permeable surface the
+fluid content has a diffusion boundary layer of well under a micrometre (docs/reduction.md section 6), so a
+surface cell's own state lags far behind. At the surface the gel is in equilibrium with the bath and free of
+traction, so its state follows locally from what the mesh does resolve, the stretch along the surface:
+with the tangential column of F (the facet's deformed length and turn, in the facet's frame of tangent and
+outward normal) given, the normal column and s solve P n = 0 and mu(F, s) = mu_bar(t) (:class:`SurfaceState`,
+the law's own UFL on one cell per facet). The first step at which any facet's half-space is indefinite gives
+the surface onset, located between the steps by bisection in time (that facet's tangential column
+interpolated linearly, the bath's mu_bar(t) from the loading); it is reported as its own kind of result (time, growth, where), not as a wrinkle count (summary.json
+``surface_onset``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import ufl
+
+from app import compat
+
+
+class SurfaceCheck:
+    """The per-step short-wave check of one problem's permeable surface (collective)."""
+
+    def __init__(self, problem, criterion: str):
+        from app.reduced.halfspace import HalfSpace
+
+        p = problem
+        self.problem, self.comm, self.criterion = p, p.comm, criterion
+        domain = p.domain
+        tdim = domain.topology.dim
+        domain.topology.create_connectivity(tdim - 1, tdim)
+        domain.topology.create_connectivity(tdim - 1, 0)
+        f2c = domain.topology.connectivity(tdim - 1, tdim)
+        f2v = domain.topology.connectivity(tdim - 1, 0)
+        n_owned_facets = domain.topology.index_map(tdim - 1).size_local
+        facets = [f for g in p.geo.facets_with_role("permeable") for f in p.tm.facets(g) if f < n_owned_facets]
+        self.facets = np.array(sorted(set(int(f) for f in facets)), dtype=np.int64)
+        v2g = compat.vertex_to_geometry(domain)
+        x = compat.node_coordinates(domain)
+        cell_nodes = compat.cell_geometry_nodes(domain)
+        self.cells = np.array([f2c.links(f)[0] for f in self.facets], dtype=np.int64)
+        ends = np.array([x[v2g[f2v.links(f)]] for f in self.facets]).reshape(-1, 2, 2)
+        self.where = ends.mean(axis=1)  # facet midpoints (reference)
+        t = ends[:, 1] - ends[:, 0]
+        t /= np.linalg.norm(t, axis=1)[:, None]
+        n = np.stack([t[:, 1], -t[:, 0]], axis=1)
+        centre = np.array([x[cell_nodes[c]].mean(axis=0) for c in self.cells]) if len(self.cells) else np.zeros((0, 2))
+        flip = np.einsum("ij,ij->i", n, self.where - centre) < 0
+        n[flip] *= -1.0
+        t = np.stack([n[:, 1], -n[:, 0]], axis=1)  # (t, n) a proper rotation
+        self.R = np.stack([t, n], axis=1)  # rows: tangent, outward normal
+        # the material of each facet's cell
+        group_of_cell = {}
+        for group in p.geo.layers:
+            for c in p.tm.cells(group):
+                group_of_cell[int(c)] = group
+        self.material = [p.geo.layers.get(group_of_cell.get(int(c)), None) for c in self.cells]
+        # the surface state in equilibrium with the bath, one cell per facet
+        self.vertex_nodes = np.array([v2g[f2v.links(f)] for f in self.facets], dtype=np.int64).reshape(-1, 2)
+        self.length = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
+        self.node_dofs = compat.lagrange1_dof_nodes(p.V_u)  # geometry node of each displacement dof block
+        first = next(iter(p.materials.values()))
+        point_materials = [p.materials.get(name) if name else first for name in self.material]
+        # the 1D forms are compiled on rank 0 first, then loaded from the cache by the others (no two
+        # processes compile one form at once)
+        self.equilibrium = self.halfspace = None
+        for turn in (0, 1):
+            if (self.comm.rank == 0) == (turn == 0):
+                self.halfspace = HalfSpace(first, criterion)
+                self.equilibrium = SurfaceState(point_materials or [first])
+            self.comm.barrier()
+        if not len(self.facets):
+            self.equilibrium = None
+        self.mats = {name: p.materials[name] for name in set(self.material) if name is not None}
+        self.history: list[tuple] = []  # the last step tested: (time, growth_mm, margin, tangential columns)
+
+    def columns(self) -> np.ndarray:
+        """The tangential column F t of every permeable facet of this rank, in the facet's frame (n, 2):
+        what the mesh resolves of the surface (the facet's deformed length and turn)."""
+        p = self.problem
+        u = p.state.x.array[p.u_dofs].reshape(-1, 2)
+        x = compat.node_coordinates(p.domain)
+        node_u = np.zeros((x.shape[0], 2))
+        node_u[self.node_dofs] = u
+        du = node_u[self.vertex_nodes[:, 1]] - node_u[self.vertex_nodes[:, 0]]
+        dX = x[self.vertex_nodes[:, 1]] - x[self.vertex_nodes[:, 0]]
+        stretch = (dX + du) / self.length[:, None]
+        sign = np.sign(np.einsum("ij,ij->i", dX, self.R[:, 0]))[:, None]  # the facet's vertex order against t
+        return np.einsum("nij,nj->ni", self.R, sign * stretch)
+
+    def margins(self, columns: np.ndarray, mu_bar: float, only: int | None = None) -> np.ndarray:
+        """The half-space margin of each facet's surface state (equal states evaluated once); ``only``: of
+        that facet alone (the others inf)."""
+        out = np.full(len(self.facets), np.inf)
+        if self.equilibrium is None:
+            return out
+        F, s = self.equilibrium.solve(columns, mu_bar)
+        F, s = np.round(F, 7), np.round(s, 7)  # states equal to 1e-7: one evaluation
+        seen: dict = {}
+        for i in range(len(self.facets)) if only is None else (only,):
+            name = self.material[i]
+            if name is None:
+                continue
+            key = (name, *F[i].ravel(), float(s[i]))
+            if key not in seen:
+                seen[key] = self.halfspace.use(self.mats[name]).margin(F[i], float(s[i]))
+            out[i] = seen[key]
+        return out
+
+    def test(self, time: float, growth_mm: float) -> dict | None:
+        """After an accepted step (collective): the surface onset record if the surface became unstable in
+        this step. The crossing is located by bisection in time between the two steps: the tangential
+        columns interpolated linearly, the bath's mu_bar(t) from the loading."""
+        cols = self.columns()
+        mu = float(self.problem.mu_bar.value)
+        m = self.margins(cols, mu)
+        i = int(np.argmin(m)) if len(m) else -1
+        mine = (float(m[i]), self.comm.rank, i) if len(m) else (np.inf, self.comm.rank, -1)
+        best = min(self.comm.allgather(mine))
+        prev, self.history = (self.history[-1] if self.history else None), [(time, growth_mm, best[0], cols)]
+        if best[0] > 0:
+            return None
+        owner, i = best[1], best[2]
+        where = self.comm.bcast(tuple(float(v) for v in self.where[i]) if self.comm.rank == owner else None,
+                                root=owner)
+        if prev is None:  # unstable in the first state tested
+            return {"kind": "surface", "time": time, "growth_mm": growth_mm, "growth_um": 1e3 * growth_mm,
+                    "where": list(where), "criterion": self._criterion_name(), "bracket": [time, time]}
+        t0, g0, m0, cols0 = prev
+        lo, hi = t0, time
+        loading = self.problem.loading
+        if self.comm.rank == owner:
+            for _ in range(40):
+                mid = 0.5 * (lo + hi)
+                f = (mid - t0) / (time - t0)
+                c = (1 - f) * cols0 + f * cols
+                if self.margins(c, loading.mu_bar(mid), only=i)[i] > 0:
+                    lo = mid
+                else:
+                    hi = mid
+                if hi - lo <= 1e-10 * max(1.0, hi):
+                    break
+        t = self.comm.bcast(0.5 * (lo + hi), root=owner)
+        f = (t - t0) / (time - t0)
+        g = (1 - f) * g0 + f * growth_mm
+        return {"kind": "surface", "time": t, "growth_mm": g, "growth_um": 1e3 * g, "where": list(where),
+                "criterion": self._criterion_name(), "bracket": [t0, time], "margin_before": m0, "margin_after": best[0]}
+
+    def _criterion_name(self) -> str:
+        return self.criterion if self.criterion != "rate" else "drained (the short-wave limit of rate)"
+
+
+class SurfaceState:
+    """The state of N surface points in equilibrium with the bath: given the tangential column c of F in the
+    surface frame, the normal column (a, b) and s with P(F, s) e_n = 0 and mu(F, s) = mu_bar, F = [[c0, a],
+    [c1, b]]. One DG0 cell per point on a 1D mesh (the law's parameters per cell), Newton on the cell-local
+    3x3 systems, warm-started from the last solution."""
+
+    def __init__(self, materials: list):
+        from mpi4py import MPI
+
+        from app.model.material import chemical_potential, first_piola
+        from app.model.potential import fields_class
+
+        n = len(materials)
+        law = materials[0].law
+        d = compat.interval_mesh(MPI.COMM_SELF, np.arange(n + 1, dtype=float))
+        V0 = compat.scalar_space(d, "DG", 0)
+        at = np.argsort(compat.dof_coordinates(V0))  # dof of point k (cell k spans [k, k + 1])
+        fields = {}
+        for name in (*law.params, "s0"):
+            f = compat.Function(V0)
+            f.x.array[at] = [getattr(m, name) for m in materials]
+            fields[name] = f
+        mat = fields_class(law)(**fields)
+        self.c = [compat.Function(V0) for _ in range(2)]
+        self.at = at
+        self.mu_bar = compat.Constant(d, compat.ScalarType(0.0))
+        W = compat.mixed_dg0_space(d, 3)
+        self.w = compat.Function(W)
+        a, b, s = ufl.split(self.w)
+        F = ufl.as_matrix([[self.c[0], a], [self.c[1], b]])
+        P = first_piola(mat, F, s)
+        mu = chemical_potential(mat, F, s)
+        v = ufl.TestFunction(W)
+        dx = ufl.Measure("dx", domain=d, metadata={"quadrature_degree": 1})
+        res = (P[0, 1] * v[0] + P[1, 1] * v[1] + (mu - self.mu_bar) * v[2]) * dx
+        self.residual = compat.form(res)
+        self.jacobian = compat.form(ufl.derivative(res, self.w, ufl.TrialFunction(W)))
+        self.dofs = []
+        for i in range(3):
+            Vi, dofs = compat.collapse(W.sub(i))
+            self.dofs.append(dofs[np.argsort(compat.dof_coordinates(Vi))])  # parent dof of point k
+        x = self.w.x.array
+        x[self.dofs[1]] = 1.0
+        x[self.dofs[2]] = [m.s0 for m in materials]
+        self._A = None
+
+    def solve(self, column: np.ndarray, mu_bar: float, tol: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
+        """(F (N, 2, 2), s (N,)) at the tangential columns ``column`` (N, 2) and the bath's mu_bar."""
+        import scipy.sparse as sp
+        import scipy.sparse.linalg as spla
+
+        for i in range(2):
+            self.c[i].x.array[self.at] = column[:, i]
+        self.mu_bar.value = mu_bar
+        x = self.w.x.array
+        ia, ib, js = self.dofs
+
+        def admissible(y):  # the law's logarithms: s > 0, det F > 0
+            return y[js].min() > 0 and (column[:, 0] * y[ib] - column[:, 1] * y[ia]).min() > 0
+
+        for _ in range(60):
+            b = compat.assemble_vector(self.residual)
+            r = b.array.copy()
+            b.destroy()
+            if self._A is None:
+                self._A = compat.create_matrix(self.jacobian)
+            compat.assemble_matrix_into(self._A, self.jacobian, [])
+            indptr, indices, values = compat.matrix_csr(self._A)
+            K = sp.csr_matrix((values, indices, indptr), shape=self._A.getSize())
+            dx = spla.spsolve(K.tocsc(), -r)
+            step = 1.0
+            while step > 1e-8 and not admissible(x + step * dx):
+                step *= 0.5
+            x += step * dx
+            if step == 1.0 and np.max(np.abs(dx)) < tol * (1.0 + np.max(np.abs(x))):
+                break
+        else:
+            raise RuntimeError("the surface's equilibrium state did not converge")
+        F = np.stack([np.stack([column[:, 0], x[ia]], axis=1), np.stack([column[:, 1], x[ib]], axis=1)], axis=1)
+        return F, x[js].copy()

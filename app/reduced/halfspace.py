@@ -1,0 +1,116 @@
+"""The short-wave limit of a traction-free surface: a homogeneous half-space in the surface's local state.
+
+A perturbation of wavenumber k along the surface lives in a layer of depth ~1/k under it, where the state
+is the surface's; as k -> infinity the stability of every such mode is that of a homogeneous half-space
+in that state. In depth units of 1/k one operator stands for every wavenumber: the mode
+u = (U1 cos x + U2 sin x, V1 cos x + V2 sin x) on Y in [-depth, 0] (the surface at Y = 0, outward normal +Y),
+clamped at -depth where it has decayed. Its gradient is dF_c cos x + dF_s sin x with
+
+    dF_c = [[U2, U1'], [V2, V1']],     dF_s = [[-U1, U2'], [-V1, V2']],
+
+and over one period the second variation is (q(dF_c) + q(dF_s)) / 2 for the law's quadratic form q at the
+state (F, s): no symmetry of F is assumed, so the same operator serves a 1D section's diagonal state and any
+2D surface state written in the surface's frame (tangent, outward normal). Criteria: undrained (s frozen),
+drained (s eliminated pointwise from each part); the rate criterion's short-wave limit is the drained one
+(its dissipation does not grow with k).
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import scipy.linalg as sla
+import ufl
+from mpi4py import MPI
+
+from app import compat
+
+
+class HalfSpace:
+    """The half-space operator of one material law under one criterion; :meth:`margin` / :meth:`definite` at
+    a state (F in the surface frame, 2x2; s) of the material last given to :meth:`use`. The law's
+    parameters are constants of the form, so one compiled form serves every material."""
+
+    def __init__(self, mat, criterion: str, degree: int = 3, depth: float = 40.0, cells: int = 96):
+        crit = "drained" if criterion == "rate" else criterion
+        if crit not in ("drained", "undrained"):
+            raise ValueError(f"criterion {criterion!r}")
+        nodes = -depth * (np.linspace(1.0, 0.0, cells + 1) ** 2)
+        d = compat.interval_mesh(MPI.COMM_SELF, nodes)
+        self.domain = d
+        self.F = compat.Constant(d, np.eye(2, dtype=compat.ScalarType))
+        self.s = compat.Constant(d, compat.ScalarType(mat.s0))
+        law = mat.law
+        self.params = {name: compat.Constant(d, compat.ScalarType(getattr(mat, name))) for name in law.params}
+        S = compat.mixed_lagrange_space(d, degree, 4)
+        p = compat.Function(S)
+        U1, U2, V1, V2 = ufl.split(p)
+        parts = (ufl.as_matrix([[U2, U1.dx(0)], [V2, V1.dx(0)]]), ufl.as_matrix([[-U1, U2.dx(0)], [-V1, V2.dx(0)]]))
+        p_ufl = SimpleNamespace(**self.params)
+        dx = ufl.Measure("dx", domain=d, metadata={"quadrature_degree": 2 * degree + 2})
+        v, dv = ufl.TestFunction(S), ufl.TrialFunction(S)
+        s = ufl.variable(self.s)
+        a = 0
+        for dF in parts:
+            bulk, constraint = law.free_energy(self.F + dF, s, p_ufl)
+            e = bulk + constraint
+            a = a + ufl.derivative(ufl.derivative(e * dx, p, v), p, dv)
+            if crit == "drained":
+                e_s = ufl.diff(e, s)
+                e_ss = ufl.diff(e_s, s)
+                a = a - ufl.derivative(e_s, p, v) * ufl.derivative(e_s, p, dv) / e_ss * dx
+        self.form = compat.form(a)
+        coords, index, field = [], [], []
+        for i in range(4):
+            Vi, dofs = compat.collapse(S.sub(i))
+            coords.append(compat.dof_coordinates(Vi))
+            index.append(dofs)
+            field.append(np.full(len(dofs), i))
+        coords, index, field = np.concatenate(coords), np.concatenate(index), np.concatenate(field)
+        keep = np.abs(coords + depth) > 1e-9 * depth  # clamped at -depth
+        order = np.lexsort((field[keep], coords[keep]))
+        self.dofs = index[keep][order]
+        self.n = len(self.dofs)
+        self._A = None
+        self._pattern = None
+
+    def use(self, mat) -> HalfSpace:
+        """Evaluate with ``mat``'s parameters from now on (a record of the same law)."""
+        for name, c in self.params.items():
+            c.value = getattr(mat, name)
+        return self
+
+    def band(self, F, s: float) -> np.ndarray:
+        """K in LAPACK lower band storage at the state (F: 2x2 in the surface frame, s)."""
+        self.F.value[:] = np.asarray(F, dtype=float)
+        self.s.value = s
+        if self._A is None:
+            self._A = compat.create_matrix(self.form)
+        compat.assemble_matrix_into(self._A, self.form, [])
+        indptr, indices, values = compat.matrix_csr(self._A)
+        if self._pattern is None:
+            pos = np.full(len(indptr) - 1, -1, dtype=np.int64)
+            pos[self.dofs] = np.arange(self.n)
+            rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+            i, j = pos[rows], pos[indices]
+            take = (i >= 0) & (j >= 0) & (i >= j)
+            self.bandwidth = int(np.max(i[take] - j[take]))
+            self._pattern = (np.flatnonzero(take), (i[take] - j[take]) * self.n + j[take])
+        take, flat = self._pattern
+        ab = np.zeros((self.bandwidth + 1) * self.n)
+        ab[flat] = values[take]
+        return ab.reshape(self.bandwidth + 1, self.n)
+
+    def definite(self, F, s: float) -> bool:
+        try:
+            sla.cholesky_banded(self.band(F, s), lower=True, check_finite=False)
+            return True
+        except sla.LinAlgError:
+            return False
+
+    def margin(self, F, s: float) -> float:
+        """The smallest eigenvalue of the Jacobi-scaled operator: negative exactly where it is indefinite."""
+        from app.reduced.modes import BandedPencil
+
+        return BandedPencil([self.band(F, s), 0.0, 0.0]).margin(0.0)

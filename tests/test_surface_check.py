@@ -1,0 +1,94 @@
+"""The 2D run's check of the permeable surface's short-wave limit (app/onset/surface.py).
+
+- the surface state in equilibrium with the bath against the closed-form laterally constrained layer;
+- a 2D bilayer whose surface becomes unstable at short waves before it wrinkles (the paper's w = 0.05 mm
+  film on a narrow strip): the surface onset at the instant the bath's chemical potential reaches that
+  of the film's homogeneous critical stretch (theory: lateral stretch 1 at the surface), and at the 1D
+  reduction's short-wave onset;
+- a homogeneous tube (ratio 1): the 2D surface onset against the 1D reduction's (the passage is
+  compressed around by the swelling, so the local state is not the flat one).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from app import config
+from app.model import theory
+from app.model.material import chemical_potential, first_piola
+from app.model.problem import layer_materials
+from app.onset.surface import SurfaceState
+from app.workflows import reduced
+from app.workflows.run import simulate
+
+
+def _critical_time(cfg) -> float:
+    """When the ramp brings the bath to the chemical potential of the film's critical constrained state."""
+    film = layer_materials(cfg)["film"]
+    lc = theory.surface_critical_stretch(film, drained=True)
+    mu_c = chemical_potential(film, ((1.0, 0.0), (0.0, lc)), theory.constrained_layer_fluid(film, lc))
+    lo = cfg["loading"]
+    return lo["ramp_time"] * (mu_c - film.mu0) / (lo["chemical_potential"] - film.mu0)
+
+
+def test_surface_state_is_the_constrained_layer_in_equilibrium_with_the_bath():
+    """Tangential column (1, 0): the normal stretch and s of a laterally constrained layer at mu_bar
+    (closed form, app.model.theory); a sheared, stretched column: P e_n = 0 and mu = mu_bar by the law's
+    float evaluation. Measured 1e-12."""
+    cfg = config.load("configs/bilayer.toml")
+    film = layer_materials(cfg)["film"]
+    st = SurfaceState([film, film, film])
+    cols = np.array([[1.0, 0.0], [0.97, 0.0], [1.02, 0.08]])
+    for mu_bar in (-5.0, -0.5, 0.0):
+        F, s = st.solve(cols, mu_bar)
+        lam = theory.constrained_layer_stretch(film, mu_bar)
+        assert F[0, 1, 1] == pytest.approx(lam, rel=1e-10) and F[0, 0, 1] == pytest.approx(0.0, abs=1e-12)
+        assert s[0] == pytest.approx(theory.constrained_layer_fluid(film, lam), rel=1e-10)
+        for i in (1, 2):
+            P = first_piola(film, F[i], s[i])
+            assert np.abs(P[:, 1]).max() < 1e-10
+            assert chemical_potential(film, F[i], s[i]) == pytest.approx(mu_bar, abs=1e-10)
+
+
+def test_2d_bilayer_reports_the_surface_onset_at_the_bath_potential_of_the_critical_state(shared_tmp, comm):
+    """w = 0.05 mm on a 0.3 mm strip: the surface onset within 1e-4 s of the closed-form instant (measured
+    4e-5: the quadratic between steps), before the 2D wrinkling onset, and within 2e-4 s of the 1D
+    reduction's converged short-wave onset."""
+    cfg = config.load("configs/bilayer.toml", [
+        "geometry.film_thickness=0.05", "geometry.length=0.3", "mesh.element_size=0.01", "mesh.film_layers=4",
+        "stability.error_estimate=false", "reduced.beside_2d=false", "output.fields=false", "output.plot=false"])
+    s = simulate(cfg, shared_tmp / "w05", comm, progress=False)
+    so = s["surface_onset"]
+    t_c = _critical_time(cfg)
+    assert so["kind"] == "surface" and so["criterion"] == "drained"
+    assert so["time"] == pytest.approx(t_c, abs=1e-4)
+    assert so["bracket"][0] <= so["time"] <= so["bracket"][1]
+    assert so["before_critical"] and s["critical"]["time"] > so["time"]
+    assert so["where"][1] == pytest.approx(0.55)  # on the film's surface
+    red = reduced.compute(cfg) if comm.rank == 0 else None
+    red = comm.bcast({k: v for k, v in red.items() if k != "_estimate"} if red else None, root=0)
+    assert red["kind"] == "surface"
+    assert red["time"] == pytest.approx(so["time"], abs=2e-4)
+
+
+def test_2d_homogeneous_tube_surface_onset_equals_the_reduction(shared_tmp, comm):
+    """A tube of one gel (ratio 1): its passage is unstable at short waves before any finite wave (1D:
+    t = 0.98757 s, no wavelength of its own). The 2D check on a coarse mesh (the state it needs is the
+    passage's hoop stretch, which the mesh resolves) agrees with the 1D onset to 1e-3 s."""
+    cfg = config.load("configs/tube.toml", [
+        "material.film.modulus_ratio=1", "mesh.element_size=0.04", "mesh.film_layers=2",
+        "stability.error_estimate=false", "reduced.beside_2d=false", "output.fields=false", "output.plot=false",
+        "time.end=1.0"])
+    s = simulate(cfg, shared_tmp / "tube1", comm, progress=False)
+    so = s["surface_onset"]
+    red = reduced.compute(cfg) if comm.rank == 0 else None
+    red = comm.bcast({k: v for k, v in red.items() if k != "_estimate"} if red else None, root=0)
+    assert red["kind"] == "surface"
+    assert so["time"] == pytest.approx(red["time"], abs=1e-3)
+    # the passage's hoop stretch is below 1 there: the local state is not the flat surface's
+    assert so["time"] != pytest.approx(_critical_time(cfg), abs=1e-4)
+    r = np.hypot(*so["where"])
+    assert r == pytest.approx(cfg["geometry"]["outer_radius"] - 0.2 - 0.02, rel=1e-3)
+    _ = brentq
