@@ -254,10 +254,9 @@ def cmd_run(args) -> int:
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
-    from app.workflows.pipeline import run_case
-
     from app.io.checkpoint import CheckpointError
     from app.io.writes import ResultWriteError
+    from app.workflows.pipeline import run_case
 
     try:
         summary = run_case(cfg, outdir, comm, resume=resume)
@@ -353,12 +352,10 @@ def cmd_reduced(args) -> int:
     except config.ConfigError as err:
         return _input_error(comm, err)
     _setup_logging(comm, args.quiet)
-    from app import logging_setup
+    from app import interrupt, logging_setup
+    from app.reduced.solve import Interrupted
     from app.reduced.transient import TransientFailed
     from app.workflows import reduced
-
-    from app import interrupt
-    from app.reduced.solve import Interrupted
 
     log = logging_setup.get()
     code = EXIT_OK

@@ -29,7 +29,7 @@ from app.model.problem import layer_materials
 from app.reduced.halfspace import HalfSpace
 from app.reduced.onset import Screen, Stability, margin_curve, mode_grid
 from app.reduced.section import Section
-from app.reduced.solve import compute, n_max
+from app.reduced.solve import n_max
 from app.reduced.transient import LayeredModel, Resolution, Transient
 from app.workflows import reduced
 

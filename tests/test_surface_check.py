@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.optimize import brentq
 
 from app import config
 from app.model import theory
@@ -91,4 +90,3 @@ def test_2d_homogeneous_tube_surface_onset_equals_the_reduction(shared_tmp, comm
     assert so["time"] != pytest.approx(_critical_time(cfg), abs=1e-4)
     r = np.hypot(*so["where"])
     assert r == pytest.approx(cfg["geometry"]["outer_radius"] - 0.2 - 0.02, rel=1e-3)
-    _ = brentq

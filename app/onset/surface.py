@@ -14,7 +14,8 @@ with the tangential column of F (the facet's deformed length and turn, in the fa
 outward normal) given, the normal column and s solve P n = 0 and mu(F, s) = mu_bar(t) (:class:`SurfaceState`,
 the law's own UFL on one cell per facet). The first step at which any facet's half-space is indefinite gives
 the surface onset, located between the steps by bisection in time (that facet's tangential column
-interpolated linearly, the bath's mu_bar(t) from the loading); it is reported as its own kind of result (time, growth, where), not as a wrinkle count (summary.json
+interpolated linearly, the bath's mu_bar(t) from the loading); it is reported as its own kind of result
+(time, growth, where), not as a wrinkle count (summary.json
 ``surface_onset``).
 """
 
@@ -96,9 +97,10 @@ class SurfaceCheck:
         sign = np.sign(np.einsum("ij,ij->i", dX, self.R[:, 0]))[:, None]  # the facet's vertex order against t
         return np.einsum("nij,nj->ni", self.R, sign * stretch)
 
-    def margins(self, columns: np.ndarray, mu_bar: float, only: int | None = None) -> np.ndarray:
-        """The half-space margin of each facet's surface state (equal states evaluated once); ``only``: of
-        that facet alone (the others inf)."""
+    def margins(self, columns: np.ndarray, mu_bar: float, only: int | None = None, exact: bool = False) -> np.ndarray:
+        """Each facet's verdict on its surface state: +1 / -1 (stable / not: a banded Cholesky), or with
+        ``exact`` the half-space margin itself; equal states are evaluated once. ``only``: that facet alone
+        (the others inf)."""
         out = np.full(len(self.facets), np.inf)
         if self.equilibrium is None:
             return out
@@ -111,7 +113,8 @@ class SurfaceCheck:
                 continue
             key = (name, *F[i].ravel(), float(s[i]))
             if key not in seen:
-                seen[key] = self.halfspace.use(self.mats[name]).margin(F[i], float(s[i]))
+                hs = self.halfspace.use(self.mats[name])
+                seen[key] = hs.margin(F[i], float(s[i])) if exact else (1.0 if hs.definite(F[i], float(s[i])) else -1.0)
             out[i] = seen[key]
         return out
 
@@ -134,7 +137,7 @@ class SurfaceCheck:
         if prev is None:  # unstable in the first state tested
             return {"kind": "surface", "time": time, "growth_mm": growth_mm, "growth_um": 1e3 * growth_mm,
                     "where": list(where), "criterion": self._criterion_name(), "bracket": [time, time]}
-        t0, g0, m0, cols0 = prev
+        t0, g0, _, cols0 = prev
         lo, hi = t0, time
         loading = self.problem.loading
         if self.comm.rank == owner:
@@ -152,7 +155,7 @@ class SurfaceCheck:
         f = (t - t0) / (time - t0)
         g = (1 - f) * g0 + f * growth_mm
         return {"kind": "surface", "time": t, "growth_mm": g, "growth_um": 1e3 * g, "where": list(where),
-                "criterion": self._criterion_name(), "bracket": [t0, time], "margin_before": m0, "margin_after": best[0]}
+                "criterion": self._criterion_name(), "bracket": [t0, time]}
 
     def _criterion_name(self) -> str:
         return self.criterion if self.criterion != "rate" else "drained (the short-wave limit of rate)"

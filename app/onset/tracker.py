@@ -11,9 +11,9 @@ stepper at the state the run continues from. With ``stability.enabled = false`` 
 
 from __future__ import annotations
 
-import numpy as np
-
 from dataclasses import dataclass
+
+import numpy as np
 
 from app.onset.bisection import Bisection
 from app.onset.policy import AfterCrossing, CrossingPolicy

@@ -37,10 +37,7 @@ class Level:
     steps: list[Snapshot]
     seconds: float
     newton_its: int
-
-    @property
-    def cells(self) -> int:
-        return self._cells
+    cells: int = 0  # of the 1D mesh
 
     def onset(self) -> Crossing | None:
         return earliest(self.curve)
@@ -81,9 +78,7 @@ def compute(section: Section, st: Settings, resolution: Resolution | None = None
 
     tr.run(st.t_end, stop=step_done, scale=time_scale, schedule=schedule)
     curve = margin_curve(stab, tr.steps, screen)
-    lev = Level(name, res, time_scale, curve, tr.steps, time.perf_counter() - t0, tr.newton_its)
-    lev._cells = len(model.nodes) - 1
-    return lev
+    return Level(name, res, time_scale, curve, tr.steps, time.perf_counter() - t0, tr.newton_its, len(model.nodes) - 1)
 
 
 def compile_forms(section: Section, st: Settings) -> None:

@@ -35,7 +35,8 @@ class TransientFailed(RuntimeError):
 @dataclass(frozen=True)
 class Resolution:
     """The 1D discretization: element degree, cells through the film, cell growth away from it and through
-    the film away from the permeable surface, and the step control (relative change of the surface fluid content per step, largest step)."""
+    the film away from the permeable surface, and the step control (the largest relative change of the
+    displacement per step, the largest and the first step)."""
 
     degree: int = 3
     film_cells: int = 12
@@ -49,8 +50,8 @@ class Resolution:
         """Level ``level`` of the mesh sequence: cells halved ``level`` times (film cells doubled, the
         grading's root)."""
         f = 2 ** level
-        return Resolution(self.degree, self.film_cells * f, self.grading ** (1.0 / f), self.surface_grading ** (1.0 / f),
-                          self.step_change, self.dt_max, self.dt_first)
+        return Resolution(self.degree, self.film_cells * f, self.grading ** (1.0 / f),
+                          self.surface_grading ** (1.0 / f), self.step_change, self.dt_max, self.dt_first)
 
 
 class LayeredModel:
@@ -234,7 +235,7 @@ class Transient:
         free = np.ones(len(w), dtype=bool)
         free[m.fixed] = False
         r0 = None
-        for it in range(self.max_it):
+        for _ in range(self.max_it):
             r, K = m.assemble()
             r[~free] = 0.0
             norm = float(np.linalg.norm(r))

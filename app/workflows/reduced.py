@@ -15,8 +15,7 @@ from pathlib import Path
 
 from app import config, logging_setup
 from app.reduced.section import Section
-from app.reduced.solve import Estimate, Settings
-from app.reduced.solve import Interrupted
+from app.reduced.solve import Estimate, Interrupted, Settings
 from app.reduced.transient import Resolution, TransientFailed
 
 SOLVER = "reduced-1d"
@@ -93,7 +92,7 @@ def compute(cfg: dict, stop=None) -> dict:
     block["mu_bar"] = section.loading.mu_bar(block["time"]) if block["time"] is not None else None
     curve = est.levels[0].curve
     early = sorted(curve.modes.values(), key=lambda c: c.time)[:ISOMODES]
-    block["isomodes"] = [(c.wrinkles, 1e3 * c.growth) for c in early]
+    block["isomodes"] = [[c.wrinkles, 1e3 * c.growth] for c in early]
     block["_estimate"] = est  # the caller's: margin curve and histories (removed before JSON)
     return block
 
