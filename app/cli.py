@@ -463,7 +463,8 @@ def _study_exit(rows, outdir, comm) -> int:
 
     if comm.rank == 0:
         done = sum(r["status"] in studies.COMPLETE for r in rows)
-        print(f"hydrobuckle: study {outdir}: {done}/{len(rows)} cases complete; study.csv, study.png, modes.png")
+        files = [f for f in ("study.csv", "study.png", "modes.png", "isomodes.png") if (outdir / f).is_file()]
+        print(f"hydrobuckle: study {outdir}: {done}/{len(rows)} cases complete; {', '.join(files)}")
     return EXIT_OK if all(r["status"] in studies.COMPLETE for r in rows) else EXIT_SOLVER
 
 

@@ -84,7 +84,8 @@ def mode_grid(n_max: int, count: int) -> list[int]:
 
 class Screen:
     """The per-step callback of the transient: screens every accepted step, and asks it to stop
-    ``horizon`` (relative) after the first crossing."""
+    ``horizon`` (relative) after the first crossing of a finite mode (a surface unstable at short waves
+    first: the screen goes on to the first finite wavelength, or the end of the run)."""
 
     def __init__(self, stab: Stability, grid: list[int], horizon: float, t_end: float):
         self.stab, self.grid, self.horizon, self.t_end = stab, grid, horizon, t_end
@@ -103,8 +104,8 @@ class Screen:
                 self.first_unstable[n] = self.index
         if None not in self.first_unstable and not self.stab.surface_pencil(snap).definite(1.0):
             self.first_unstable[None] = self.index
-        if self.first_unstable and self.t_first is None:
-            self.t_first = snap.t
+        if any(n is not None for n in self.first_unstable) and self.t_first is None:
+            self.t_first = snap.t  # the first finite mode (the short-wave limit alone does not end the screen)
         return self.t_first is not None and snap.t >= self.t_first * (1.0 + self.horizon)
 
 
@@ -219,8 +220,8 @@ def interpolated_root(ts: list[float], margins: list[float]) -> float:
 
 def margin_curve(stab: Stability, steps: list[Snapshot], screen: Screen, span: float = 3.0,
                  max_modes: int = 400) -> MarginCurve:
-    """Locate the integer modes from the screened grid's earliest crossing / ``span`` to times ``span``
-    (at most ``max_modes`` of them), and the short-wave limit."""
+    """Locate the integer modes from each screened local minimum (and the earliest crossing) / ``span`` to
+    times ``span`` (at most ``max_modes`` per window), and the short-wave limit."""
     sec = stab.model.section
     loc = Locator(stab, steps)
     out = MarginCurve(stab.criterion, sec.shape, grid={n: i for n, i in screen.first_unstable.items() if n},
@@ -229,13 +230,25 @@ def margin_curve(stab: Stability, steps: list[Snapshot], screen: Screen, span: f
     if i_sw is not None:
         out.short_wave = loc.crossing(None, i_sw)
     if out.grid:
-        n_best = min(out.grid, key=lambda n: (out.grid[n], n))
-        lo = max(1, int(math.floor(n_best / span)))
-        hi = min(out.n_max, int(math.ceil(n_best * span)))
-        ns = range(lo, hi + 1)
-        if len(ns) > max_modes:
-            ns = sorted({int(round(v)) for v in np.geomspace(lo, hi, max_modes)})
-        for n in ns:
+        ns_grid = sorted(out.grid)
+        idx = [out.grid[n] for n in ns_grid]
+        centres = {min(out.grid, key=lambda n: (out.grid[n], n))}
+        # each local minimum of the screened crossing steps along n: a mode with a wavelength of its own,
+        # also where shorter waves cross earlier still (the surface's limit)
+        for j in range(1, len(ns_grid) - 1):
+            if idx[j] <= idx[j - 1] and idx[j] <= idx[j + 1]:
+                centres.add(ns_grid[j])
+        if len(ns_grid) > 1 and idx[0] < idx[1]:
+            centres.add(ns_grid[0])
+        todo: set[int] = set()
+        for c in centres:
+            lo = max(1, int(math.floor(c / span)))
+            hi = min(out.n_max, int(math.ceil(c * span)))
+            ns = range(lo, hi + 1)
+            if len(ns) > max_modes:
+                ns = sorted({int(round(v)) for v in np.geomspace(lo, hi, max_modes)})
+            todo.update(ns)
+        for n in sorted(todo):
             i = loc.first_indefinite(n)
             if i is not None:
                 out.modes[n] = loc.crossing(n, i)
