@@ -202,3 +202,19 @@ def test_mode_count_of_the_screen_reaches_the_largest_wavenumber():
     assert sec.wavenumber(n) * sec.film_thickness >= cfg["reduced"]["max_wavenumber"]
     assert sec.wavenumber(n - 1) * sec.film_thickness < cfg["reduced"]["max_wavenumber"]
     assert sec.wrinkle_count(38) == 19 and sec.local_wavenumber(38) == pytest.approx(2 * math.pi / (2 * 2.0 / 38))
+
+
+@pytest.mark.parametrize("sets", [[], ["geometry.film_thickness=0.05"]])
+def test_answer_does_not_depend_on_the_largest_wavenumber_screened(sets):
+    """Screening modes up to k w = 80 instead of 20: the same answer (a finite mode, or the surface's
+    short-wave limit, which covers every wave beyond the screened ones), and the same first finite
+    wavelength: convergence in the largest n tested."""
+    a = reduced.compute(config.load("configs/bilayer.toml", sets))
+    b = reduced.compute(config.load("configs/bilayer.toml", [*sets, "reduced.max_wavenumber=80"]))
+    assert b["tested_mode_numbers"][1] >= 4 * a["tested_mode_numbers"][1] - 4
+    assert (a["kind"], a["mode_number"]) == (b["kind"], b["mode_number"])
+    assert b["growth_um"] == pytest.approx(a["growth_um"], rel=1e-9)
+    fa, fb = a["first_finite_wavelength"], b["first_finite_wavelength"]
+    assert (fa is None) == (fb is None)
+    if fa:
+        assert fa["mode_number"] == fb["mode_number"] and fb["growth_um"] == pytest.approx(fa["growth_um"], rel=1e-9)
