@@ -42,7 +42,7 @@ plot = false
 """
 # The same as --set overrides of a study (whose own base config is the paper's 2 mm bilayer).
 SHRINK = ["geometry.length=0.15", "geometry.substrate_thickness=0.15", "mesh.element_size=0.01",
-          "mesh.film_layers=2", "mesh.substrate_grading=1.25"]
+          "mesh.film_layers=2", "mesh.substrate_grading=1.25", "reduced.beside_2d=false"]
 
 
 def _sets(items):

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import subprocess
@@ -218,3 +219,27 @@ def test_answer_does_not_depend_on_the_largest_wavenumber_screened(sets):
     assert (fa is None) == (fb is None)
     if fa:
         assert fa["mode_number"] == fb["mode_number"] and fb["growth_um"] == pytest.approx(fa["growth_um"], rel=1e-9)
+
+
+def test_study_by_the_reduction_matches_single_computations_and_reruns_nothing(shared_tmp, comm):
+    """``study bilayer-modulus-ratio --reduced`` (two values): each row is the single reduced computation
+    of its case (solver column reduced-1d, the same g and N_c), a rerun keeps every case, and a study the
+    reduction does not cover is refused with one line naming the case, exit 2, nothing created."""
+    from app import cli
+    from app.workflows import studies
+
+    out = shared_tmp / "rstudy"
+    assert cli.main(["study", "bilayer-modulus-ratio", "--reduced", "--values", "4,8", "-o", str(out), "-q"]) == 0
+    rows = on_rank0(lambda: list(csv.DictReader(open(out / "study.csv"))))
+    assert [r["solver"] for r in rows] == ["reduced-1d"] * 2 and [r["onset"] for r in rows] == ["wrinkles"] * 2
+    _, cases = studies.study_cases("bilayer-modulus-ratio", out, [8.0], [])
+    single = reduced.compute(cases[0].cfg) if comm.rank == 0 else None
+    single = comm.bcast(None if single is None else {k: v for k, v in single.items() if k != "_estimate"}, root=0)
+    assert float(rows[1]["g_c_um"]) == pytest.approx(single["growth_um"], rel=1e-12)
+    assert float(rows[1]["N_c"]) == single["wrinkle_count"] == 19
+    stamp = on_rank0(lambda: (out / "modulus_ratio=8" / "summary.json").stat().st_mtime_ns)
+    assert cli.main(["study", "bilayer-modulus-ratio", "--reduced", "--values", "4,8", "-o", str(out), "-q"]) == 0
+    assert on_rank0(lambda: (out / "modulus_ratio=8" / "summary.json").stat().st_mtime_ns) == stamp
+    bad = shared_tmp / "rbad"
+    assert cli.main(["study", "tube-aspect-ratio", "--reduced", "-o", str(bad)]) == 2
+    assert not on_rank0(bad.exists)
