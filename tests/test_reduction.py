@@ -243,3 +243,29 @@ def test_study_by_the_reduction_matches_single_computations_and_reruns_nothing(s
     bad = shared_tmp / "rbad"
     assert cli.main(["study", "tube-aspect-ratio", "--reduced", "-o", str(bad)]) == 2
     assert not on_rank0(bad.exists)
+
+
+@pytest.mark.parametrize("criterion", ["drained", "undrained"])
+def test_mode_operator_of_a_homogeneous_layer_at_short_waves_is_the_surface_condition(criterion):
+    """The finite-mode operator (app/reduced/modes.py, not the half-space) of a homogeneous gel (ratio 1)
+    in the homogeneous constrained state of stretch lambda, at k = 500 /mm (waves 12.6 um on a 0.51 mm
+    layer): it loses definiteness at the closed-form short-wave critical stretch (3.1410 drained, 3.3607
+    undrained). Measured 1e-6 / 8e-6."""
+    cfg = config.load("configs/bilayer.toml", ["material.film.modulus_ratio=1"])
+    sec = Section.from_config(cfg)
+    m = LayeredModel(sec, reduced.settings(cfg).resolution)
+    stab = Stability(m, criterion)
+    gel = sec.materials["film"]
+    k = 500.0
+
+    def margin(lam):
+        s = theory.constrained_layer_fluid(gel, lam)
+        state = np.zeros_like(m.state.x.array)
+        state[m.v_dofs] = (lam - 1.0) * m.x_v
+        state[m.q_dofs] = (gel.s0 - s) * m.x_q  # s = s0 - Q'
+        stab.base.x.array[:] = state
+        m.lam_x.value = 1.0
+        return stab.op.polynomial().margin(k)
+
+    lam = brentq(margin, 2.5, theory.BIOT_CUBIC_RATIO - 1e-3, xtol=1e-10)
+    assert lam == pytest.approx(theory.surface_critical_stretch(gel, drained=criterion == "drained"), rel=3e-5)
