@@ -72,8 +72,9 @@ class HalfSpace:
         order = np.lexsort((field[keep], coords[keep]))
         self.dofs = index[keep][order]
         self.n = len(self.dofs)
-        self._A = None
-        self._pattern = None
+        from app.reduced.modes import BandAssembler
+
+        self._assembler = BandAssembler(self.form, self.dofs)
 
     def use(self, mat) -> HalfSpace:
         """Evaluate with ``mat``'s parameters from now on (a record of the same law)."""
@@ -85,22 +86,7 @@ class HalfSpace:
         """K in LAPACK lower band storage at the state (F: 2x2 in the surface frame, s)."""
         self.F.value[:] = np.asarray(F, dtype=float)
         self.s.value = s
-        if self._A is None:
-            self._A = compat.create_matrix(self.form)
-        compat.assemble_matrix_into(self._A, self.form, [])
-        indptr, indices, values = compat.matrix_csr(self._A)
-        if self._pattern is None:
-            pos = np.full(len(indptr) - 1, -1, dtype=np.int64)
-            pos[self.dofs] = np.arange(self.n)
-            rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
-            i, j = pos[rows], pos[indices]
-            take = (i >= 0) & (j >= 0) & (i >= j)
-            self.bandwidth = int(np.max(i[take] - j[take]))
-            self._pattern = (np.flatnonzero(take), (i[take] - j[take]) * self.n + j[take])
-        take, flat = self._pattern
-        ab = np.zeros((self.bandwidth + 1) * self.n)
-        ab[flat] = values[take]
-        return ab.reshape(self.bandwidth + 1, self.n)
+        return self._assembler.band(self._assembler.values())
 
     def definite(self, F, s: float) -> bool:
         try:

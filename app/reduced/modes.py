@@ -100,41 +100,51 @@ class ModeOperator:
         self.dofs = index[keep][order]  # row i of the reduced matrix = dof self.dofs[i]
         self.n = len(self.dofs)
         self.bandwidth = None
-        self._band_index = None
-        self._A = None
+        self.assembler = BandAssembler(self.form, self.dofs)
 
-    def _values(self, k: float) -> np.ndarray:
-        """The assembled matrix's CSR values at wavenumber k (its pattern is the same for every k)."""
-        self.k.value = k
+    def polynomial(self) -> BandedPencil:
+        """K0, K1, K2 at the current base state (the caller sets it)."""
+        asm = self.assembler
+        vals = []
+        for k in (0.0, 1.0, -1.0):
+            self.k.value = k
+            vals.append(asm.values())
+        v0, vp, vm = vals
+        self.bandwidth = asm.bandwidth
+        return BandedPencil([asm.band(v) for v in (v0, 0.5 * (vp - vm), 0.5 * (vp + vm) - v0)])
+
+
+class BandAssembler:
+    """A bilinear form assembled into LAPACK lower band storage (ab[i - j, j] = K[i, j]) in a fixed order
+    of the dofs kept (``dofs[i]`` is row i); the matrix and the band pattern are built once."""
+
+    def __init__(self, form, dofs: np.ndarray):
+        self.form, self.dofs, self.n = form, dofs, len(dofs)
+        self.bandwidth = None
+        self._A = None
+        self._pattern = None
+
+    def values(self) -> np.ndarray:
+        """The assembled matrix's CSR values (the pattern is the same every time)."""
         if self._A is None:
             self._A = compat.create_matrix(self.form)
         compat.assemble_matrix_into(self._A, self.form, [])
         indptr, indices, values = compat.matrix_csr(self._A)
-        if self._band_index is None:
-            self._band_index = self._pattern(indptr, indices)
+        if self._pattern is None:
+            pos = np.full(len(indptr) - 1, -1, dtype=np.int64)
+            pos[self.dofs] = np.arange(self.n)
+            rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+            i, j = pos[rows], pos[indices]
+            take = (i >= 0) & (j >= 0) & (i >= j)
+            self.bandwidth = int(np.max(i[take] - j[take]))
+            self._pattern = (np.flatnonzero(take), (i[take] - j[take]) * self.n + j[take])
         return values
 
-    def _pattern(self, indptr, indices):
-        """Where each stored entry of the lower triangle (kept dofs) goes in band storage."""
-        pos = np.full(self.S.dofmap.index_map.size_local * self.S.dofmap.index_map_bs, -1, dtype=np.int64)
-        pos[self.dofs] = np.arange(self.n)
-        rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
-        i, j = pos[rows], pos[indices]
-        take = (i >= 0) & (j >= 0) & (i >= j)
-        self.bandwidth = int(np.max(i[take] - j[take]))
-        flat = (i[take] - j[take]) * self.n + j[take]  # ab[i - j, j], row-major (bandwidth + 1, n)
-        return np.flatnonzero(take), flat
-
-    def polynomial(self) -> BandedPencil:
-        """K0, K1, K2 at the current base state (the caller sets it)."""
-        v0, vp, vm = self._values(0.0), self._values(1.0), self._values(-1.0)
-        take, flat = self._band_index
-        bands = []
-        for vals in (v0, 0.5 * (vp - vm), 0.5 * (vp + vm) - v0):
-            ab = np.zeros((self.bandwidth + 1) * self.n)
-            ab[flat] = vals[take]  # each (i, j) is stored once
-            bands.append(ab.reshape(self.bandwidth + 1, self.n))
-        return BandedPencil(bands)
+    def band(self, values: np.ndarray) -> np.ndarray:
+        take, flat = self._pattern
+        ab = np.zeros((self.bandwidth + 1) * self.n)
+        ab[flat] = values[take]  # each (i, j) is stored once
+        return ab.reshape(self.bandwidth + 1, self.n)
 
 
 class BandedPencil:
