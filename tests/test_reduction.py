@@ -95,7 +95,7 @@ def test_surface_crossing_comes_at_the_homogeneous_critical_stretch(criterion, r
     st = reduced.settings(cfg)
     m = LayeredModel(sec, st.resolution)
     stab = Stability(m, criterion)
-    screen = Screen(stab, mode_grid(8, 8), 20.0, 3.0)  # a few modes: the surface limit is what is tested
+    screen = Screen(stab, mode_grid(8, 8), 20.0)  # a few modes: the surface limit is what is tested
     tr = Transient(m)
     tr.run(3.0, stop=lambda snap, i: screen(snap, i) or (None in screen.first_unstable))
     curve = margin_curve(stab, tr.steps, screen)

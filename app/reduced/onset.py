@@ -87,23 +87,21 @@ class Screen:
     ``horizon`` (relative) after the first crossing of a finite mode (a surface unstable at short waves
     first: the screen goes on to the first finite wavelength, or the end of the run)."""
 
-    def __init__(self, stab: Stability, grid: list[int], horizon: float, t_end: float):
-        self.stab, self.grid, self.horizon, self.t_end = stab, grid, horizon, t_end
+    def __init__(self, stab: Stability, grid: list[int], horizon: float):
+        self.stab, self.grid, self.horizon = stab, grid, horizon
         self.section = stab.model.section
         self.first_unstable: dict = {}  # mode n (None: the short-wave limit) -> index of its first indefinite step
-        self.index = 0  # of the step screened last
         self.t_first: float | None = None
 
     def __call__(self, snap: Snapshot, index: int) -> bool:
-        self.index = index
         if snap.t == 0.0:
             return False
         P = self.stab.pencil(snap)
         for n in self.grid:
             if n not in self.first_unstable and not P.definite(self.section.wavenumber(n)):
-                self.first_unstable[n] = self.index
+                self.first_unstable[n] = index
         if None not in self.first_unstable and not self.stab.surface_pencil(snap).definite(1.0):
-            self.first_unstable[None] = self.index
+            self.first_unstable[None] = index
         if any(n is not None for n in self.first_unstable) and self.t_first is None:
             self.t_first = snap.t  # the first finite mode (the short-wave limit alone does not end the screen)
         return self.t_first is not None and snap.t >= self.t_first * (1.0 + self.horizon)

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 from app.reduced.onset import Crossing, MarginCurve, Screen, Stability, margin_curve, mode_grid
 from app.reduced.section import Section
-from app.reduced.transient import LayeredModel, Resolution, Snapshot, Transient
+from app.reduced.transient import LayeredModel, Resolution, Snapshot, Transient, schedule
 
 MAX_WAVENUMBER = 20.0  # largest k w tested on the mode grid (beyond it: the short-wave limit)
 GRID = 48  # screened mode numbers per step
@@ -68,7 +68,7 @@ def compute(section: Section, st: Settings, resolution: Resolution | None = None
     t0 = time.perf_counter()
     model = LayeredModel(section, res)
     stab = Stability(model, st.criterion, st.tau)
-    screen = Screen(stab, mode_grid(n_max(section, st.max_wavenumber), st.grid), st.horizon, st.t_end)
+    screen = Screen(stab, mode_grid(n_max(section, st.max_wavenumber), st.grid), st.horizon)
     tr = Transient(model)
 
     def step_done(snap, index):
@@ -103,7 +103,7 @@ def converged(section: Section, st: Settings, stop=None) -> Estimate:
     is first order), the mesh refined once. The answer is the time-extrapolated base value; its error bar
     combines the time extrapolation's size (the halved-step error) and the mesh change."""
     base = compute(section, st, stop=stop)
-    sched = [b.t - a.t for a, b in zip(base.steps, base.steps[1:])]
+    sched = schedule(base.steps)
     halved = compute(section, st, schedule=sched, time_scale=2, name="time", stop=stop)
     finer = compute(section, st, resolution=st.resolution.refined(1), schedule=sched, name="mesh", stop=stop)
     levels = [base, halved, finer]

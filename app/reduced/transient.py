@@ -81,7 +81,6 @@ class LayeredModel:
         self._forms()
         self.fixed = self._fixed_dofs()
         self.surface_v = self._dof_at(self.v_dofs, self.x_v, section.surface)
-        self.surface_q = self._dof_at(self.q_dofs, self.x_q, section.surface)
 
     # --- setup --------------------------------------------------------------------------------
 
@@ -283,10 +282,6 @@ class Transient:
         dw[m.order] = x
         return dw
 
-    def surface_content(self) -> float:
-        m = self.m
-        return float(m.state.x.array[m.surface_q])
-
     def run(self, t_end: float, stop=None, scale: int = 1, schedule: list[float] | None = None) -> list[Snapshot]:
         """Advance to ``t_end`` (or until ``stop(snapshot, index)`` is true). Without ``schedule`` the steps adapt;
         with it (the step sizes of another run) each is taken as ``scale`` equal sub-steps, so two runs
@@ -328,5 +323,7 @@ class Transient:
                 break
         return self.steps
 
-    def schedule(self) -> list[float]:
-        return [b.t - a.t for a, b in zip(self.steps, self.steps[1:])]
+
+def schedule(steps: list[Snapshot]) -> list[float]:
+    """The step sizes of a run's stored steps (to replay it with :meth:`Transient.run`'s ``schedule``)."""
+    return [b.t - a.t for a, b in zip(steps, steps[1:])]
