@@ -1,8 +1,9 @@
-"""Every dolfinx-0.5-specific call hydrobuckle makes, in one place.
+"""Every dolfinx-version-specific call hydrobuckle makes, in one place.
 
-A port to a newer dolfinx (element constructors from basix.ufl, ``functionspace``,
-``gmshio.model_to_mesh`` returning a named tuple, ``x.petsc_vec`` instead of ``vector``)
-should only need to touch this module.
+Two stacks are supported and tested: dolfinx 0.5 (Debian 12: UFL 2022 elements, ``FunctionSpace``,
+``Function.vector``, adjacency-list dofmaps) and dolfinx 0.9 (Debian 13: ``basix.ufl`` elements,
+``functionspace``, ``x.petsc_vec``, array dofmaps, ``alpha`` in lifting). Each difference is one
+branch on :data:`MODERN` below; nothing else in hydrobuckle looks at the dolfinx version.
 """
 
 from __future__ import annotations
@@ -19,36 +20,67 @@ from petsc4py import PETSc
 DOLFINX_VERSION = dolfinx.__version__
 ScalarType = PETSc.ScalarType
 
+#: dolfinx >= 0.7: elements from basix.ufl, ``fem.functionspace``, ndarray dofmaps, ``x.petsc_vec``.
+MODERN = tuple(int(p) for p in DOLFINX_VERSION.split(".")[:2]) >= (0, 7)
+
+if MODERN:
+    import basix.ufl
+
+
+def _element(family: str, cell, degree: int, shape=None):
+    """A finite element of ``family`` on the UFL cell ``cell`` (a vector element with ``shape``)."""
+    if MODERN:
+        return basix.ufl.element(family, cell.cellname(), degree, shape=shape)
+    if shape is not None:
+        return ufl.VectorElement(family, cell, degree, dim=shape[0])
+    return ufl.FiniteElement(family, cell, degree)
+
+
+def _mixed(elements):
+    return basix.ufl.mixed_element(elements) if MODERN else ufl.MixedElement(elements)
+
+
+def _space(domain, element):
+    return fem.functionspace(domain, element) if MODERN else fem.FunctionSpace(domain, element)
+
+
+def _cells_by_row(adjacency, n: int) -> np.ndarray:
+    """A dofmap (an adjacency list in 0.5, an array in 0.9) as an (n, entries per cell) int64 array."""
+    data = adjacency.array if hasattr(adjacency, "array") else adjacency
+    return np.asarray(data, dtype=np.int64).reshape(n, -1)
+
+
+def placeholder_domain():
+    """An abstract UFL quadrilateral domain, for UFL expressions of Constants evaluated without a mesh."""
+    return ufl.Mesh(_element("Lagrange", ufl.quadrilateral, 1, shape=(2,)))
+
+
 # --- function spaces -------------------------------------------------------------------
 
 
 def mixed_displacement_flux_space(domain):
     """Vector Q1 displacement x RTCF1 flux (lowest-order Raviart-Thomas on quadrilaterals)."""
     cell = domain.ufl_cell()
-    u_el = ufl.VectorElement("Lagrange", cell, 1)
-    h_el = ufl.FiniteElement("RTCF", cell, 1)
-    return fem.FunctionSpace(domain, ufl.MixedElement([u_el, h_el]))
+    return _space(domain, _mixed([_element("Lagrange", cell, 1, shape=(2,)), _element("RTCF", cell, 1)]))
 
 
 def mixed_displacement_content_space(domain):
     """Vector Q1 displacement x DG0 fluid content: the unknowns of the drained stability test
     (the fluid content per cell is what the divergence of an RTCF flux can change)."""
     cell = domain.ufl_cell()
-    u_el = ufl.VectorElement("Lagrange", cell, 1)
-    c_el = ufl.FiniteElement("DG", cell, 0)
-    return fem.FunctionSpace(domain, ufl.MixedElement([u_el, c_el]))
+    return _space(domain, _mixed([_element("Lagrange", cell, 1, shape=(2,)), _element("DG", cell, 0)]))
 
 
 def mixed_lagrange_space(domain, degree: int, count: int):
     """``count`` scalar Lagrange fields of one degree in one mixed space (the 1D reduction's unknowns)."""
-    el = ufl.FiniteElement("Lagrange", domain.ufl_cell(), degree)
-    return fem.FunctionSpace(domain, ufl.MixedElement([el] * count))
+    el = _element("Lagrange", domain.ufl_cell(), degree)
+    return _space(domain, _mixed([el] * count))
 
 
 def mixed_dg0_space(domain, count: int):
     """``count`` cell-wise constant scalar fields in one mixed space."""
-    el = ufl.FiniteElement("DG", domain.ufl_cell(), 0)
-    return fem.FunctionSpace(domain, ufl.MixedElement([el] * count))
+    el = _element("DG", domain.ufl_cell(), 0)
+    return _space(domain, _mixed([el] * count))
 
 
 def interval_mesh(comm, nodes: np.ndarray):
@@ -74,15 +106,16 @@ def matrix_csr(A):
 
 
 def scalar_space(domain, family: str, degree: int):
-    return fem.FunctionSpace(domain, (family, degree))
+    return _space(domain, _element(family, domain.ufl_cell(), degree))
 
 
 def vector_space(domain, family: str, degree: int):
-    return fem.VectorFunctionSpace(domain, (family, degree))
+    """A 2-vector-valued space (hydrobuckle's meshes are planar)."""
+    return _space(domain, _element(family, domain.ufl_cell(), degree, shape=(2,)))
 
 
 def rtcf_space(domain):
-    return fem.FunctionSpace(domain, ufl.FiniteElement("RTCF", domain.ufl_cell(), 1))
+    return _space(domain, _element("RTCF", domain.ufl_cell(), 1))
 
 
 def collapse(subspace):
@@ -93,7 +126,7 @@ def collapse(subspace):
 
 def function_vector(f: fem.Function) -> PETSc.Vec:
     """The PETSc vector that shares memory with ``f.x.array``."""
-    return f.vector
+    return f.x.petsc_vec if MODERN else f.vector
 
 
 def scatter_forward(f: fem.Function) -> None:
@@ -140,17 +173,15 @@ def vertex_to_geometry(domain) -> np.ndarray:
     n_vertices = domain.topology.index_map(0).size_local + domain.topology.index_map(0).num_ghosts
     out = np.full(n_vertices, -1, dtype=np.int64)
     n_cells = domain.topology.index_map(tdim).size_local + domain.topology.index_map(tdim).num_ghosts
+    nodes = _cells_by_row(x_dofmap, n_cells)
     for c in range(n_cells):
-        out[c2v.links(c)] = x_dofmap.links(c)[:len(c2v.links(c))]
+        out[c2v.links(c)] = nodes[c, :len(c2v.links(c))]
     return out
 
 
 def cell_geometry_nodes(domain) -> np.ndarray:
     """Geometry node indices per cell (owned + ghost), shape (num_cells, nodes_per_cell)."""
-    dm = domain.geometry.dofmap
-    n = domain.topology.index_map(domain.topology.dim).size_local + \
-        domain.topology.index_map(domain.topology.dim).num_ghosts
-    return np.asarray(dm.array, dtype=np.int64).reshape(n, -1)
+    return _cells_by_row(domain.geometry.dofmap, num_local_cells(domain))
 
 
 def num_local_cells(domain) -> int:
@@ -177,7 +208,7 @@ def lagrange1_dof_nodes(V) -> np.ndarray:
     sits on the cell's k-th geometry node; checked here against the dof coordinates."""
     domain = V.mesh
     n = num_local_cells(domain)
-    dofs = np.asarray(V.dofmap.list.array, dtype=np.int64).reshape(n, -1)
+    dofs = _cells_by_row(V.dofmap.list, n)
     nodes = cell_geometry_nodes(domain)
     if dofs.shape != nodes.shape:
         raise RuntimeError(f"{dofs.shape[1]} dofs per cell but {nodes.shape[1]} geometry nodes: not P1 on a P1 mesh")
@@ -199,7 +230,7 @@ def facet_of_dofs(V) -> np.ndarray:
     domain.topology.create_connectivity(tdim, tdim - 1)
     n = num_local_cells(domain)
     c2f = np.asarray(domain.topology.connectivity(tdim, tdim - 1).array, dtype=np.int64).reshape(n, -1)
-    dofs = np.asarray(V.dofmap.list.array, dtype=np.int64).reshape(n, -1)
+    dofs = _cells_by_row(V.dofmap.list, n)
     size = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
     out = np.full(size, -1, dtype=np.int64)
     layout = V.dofmap.dof_layout
@@ -328,7 +359,10 @@ def assemble_residual_into(b, L, a, bcs, x, lifting: bool = True):
         b_local.set(0.0)
     fem_petsc.assemble_vector(b, L)
     if lifting:
-        fem_petsc.apply_lifting(b, [a], bcs=[bcs], x0=[x], scale=-1.0)
+        if MODERN:
+            fem_petsc.apply_lifting(b, [a], bcs=[bcs], x0=[x], alpha=-1.0)
+        else:
+            fem_petsc.apply_lifting(b, [a], bcs=[bcs], x0=[x], scale=-1.0)
     b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
     fem_petsc.set_bc(b, bcs, x, -1.0)
 
@@ -370,7 +404,8 @@ def form_signature(compiled) -> str:
 
 def expression(ufl_expr, V):
     """A compiled UFL expression evaluated at the interpolation points of V."""
-    return fem.Expression(ufl_expr, V.element.interpolation_points())
+    points = V.element.interpolation_points
+    return fem.Expression(ufl_expr, points() if callable(points) else points)
 
 
 

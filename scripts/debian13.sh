@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# Run a command in this checkout inside a Debian 13 (trixie) root: dolfinx 0.9, PETSc/SLEPc 3.22,
+# gmsh 4.13, Python 3.13. The root is built once with debootstrap from the Debian mirror apt already
+# uses and kept (with its apt packages and form cache) in $HYDROBUCKLE_DEBIAN13_ROOT, default
+# /var/cache/hydrobuckle/debian13, so a repeated run downloads nothing. Needs root.
+#   scripts/debian13.sh bash scripts/test.sh       the suite on Debian 13
+#   scripts/debian13.sh bash scripts/demo.sh       the demo
+# The checkout is bind-mounted at /hydrobuckle; its .venv there is the root's own
+# (/opt/hydrobuckle-venv in the root), so it never mixes with this machine's .venv.
+# Exit codes: the command's; 75 when the root cannot be built because the mirror is unreachable
+# (one line says so).
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+root="${HYDROBUCKLE_DEBIAN13_ROOT:-/var/cache/hydrobuckle/debian13}"
+[ "$(id -u)" -eq 0 ] || { echo "debian13: needs root (debootstrap, chroot, mounts)" >&2; exit 2; }
+[ $# -gt 0 ] || { echo "usage: scripts/debian13.sh COMMAND [ARG...]" >&2; exit 2; }
+
+# The mirror apt uses on this machine (deb822 or one-line sources), else deb.debian.org.
+mirror=$(sed -n 's/^URIs:[[:space:]]*\([^[:space:]]*\/debian\)[[:space:]]*$/\1/p' \
+           /etc/apt/sources.list.d/*.sources 2>/dev/null | head -n1)
+[ -n "$mirror" ] || mirror=$(awk '$1 == "deb" && $2 ~ /\/debian\/?$/ {print $2; exit}' \
+                             /etc/apt/sources.list /etc/apt/sources.list.d/*.list 2>/dev/null || true)
+mirror="${mirror:-http://deb.debian.org/debian}"
+
+unreachable() {
+  echo "debian13: the Debian mirror $mirror is unreachable ($1); the Debian 13 environment is skipped" >&2
+  exit 75
+}
+
+if [ ! -e "$root/.hydrobuckle-base" ]; then
+  command -v debootstrap >/dev/null || {
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends debootstrap >/dev/null \
+      || unreachable "apt-get install debootstrap failed"; }
+  python3 - "$mirror" <<'PY' || unreachable "no answer from $mirror/dists/trixie/Release"
+import sys, urllib.request
+urllib.request.urlopen(sys.argv[1].rstrip("/") + "/dists/trixie/Release", timeout=20).read(64)
+PY
+  echo "debian13: building a minimal trixie root in $root (about 2 minutes, once)"
+  rm -rf "$root.part"
+  mkdir -p "$(dirname "$root")"
+  debootstrap --variant=minbase trixie "$root.part" "$mirror" >"$root.log" 2>&1 \
+    || { tail -n 5 "$root.log" >&2; unreachable "debootstrap failed, log $root.log"; }
+  rm -rf "$root"
+  mv "$root.part" "$root"
+  touch "$root/.hydrobuckle-base"
+fi
+
+mounted=()
+cleanup() {
+  local i
+  for ((i = ${#mounted[@]} - 1; i >= 0; i--)); do umount -l "${mounted[$i]}" 2>/dev/null || true; done
+}
+trap cleanup EXIT
+mountpoint -q "$root/proc" || { mount -t proc proc "$root/proc"; mounted+=("$root/proc"); }
+for d in dev sys; do
+  mountpoint -q "$root/$d" || { mount --rbind "/$d" "$root/$d"; mount --make-rslave "$root/$d"; mounted+=("$root/$d"); }
+done
+mkdir -p "$root/hydrobuckle" "$root/opt/hydrobuckle-venv"
+mountpoint -q "$root/hydrobuckle" || { mount --bind "$here" "$root/hydrobuckle"; mounted+=("$root/hydrobuckle"); }
+# The checkout's .venv is this machine's; inside the root, .venv is the root's own venv (mounted
+# over it in the root only), so the README's commands run unchanged on both.
+mkdir -p "$here/.venv"
+mountpoint -q "$root/hydrobuckle/.venv" || {
+  mount --bind "$root/opt/hydrobuckle-venv" "$root/hydrobuckle/.venv"; mounted+=("$root/hydrobuckle/.venv"); }
+cp -L /etc/resolv.conf "$root/etc/resolv.conf" 2>/dev/null || true
+
+# git refuses a checkout owned by another uid unless told it is safe (the bind mount keeps owners).
+chroot "$root" /usr/bin/env -i HOME=/root PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
+  LANG=C.UTF-8 CI="${CI:-}" OMPI_ALLOW_RUN_AS_ROOT=1 \
+  OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 bash -c 'cd /hydrobuckle && exec "$@"' debian13 "$@"
