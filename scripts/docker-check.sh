@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
-# Build the hydrobuckle Docker image and check the README's docker commands (minutes; not in .ci/run).
-#   bash scripts/docker-check.sh [--tests] [--keep-daemon]
+# Build the hydrobuckle Docker images (debian:trixie, the default, and debian:bookworm) and check the
+# README's docker commands on each (minutes; not in .ci/run).
+#   bash scripts/docker-check.sh [--tests] [--keep-daemon] [--release=trixie|bookworm]
 # - installs docker.io and debootstrap if missing (apt-get, needs root);
 # - starts dockerd if no daemon answers, and stops only that daemon (by its PID) at the end;
-# - uses debian:bookworm if present or pullable, else builds it with debootstrap (minbase) from the
-#   Debian mirror this machine's apt uses and imports it;
+# - uses debian:trixie / debian:bookworm if present or pullable, else builds them with debootstrap
+#   (minbase) from the Debian mirror this machine's apt uses and imports them;
+# - tags hydrobuckle:trixie, hydrobuckle:bookworm, and hydrobuckle = hydrobuckle:trixie;
 # - builds the image, runs `version`, the README's `mpirun -n 2 hydrobuckle run` on a small mesh as
 #   root and as a non-root --user with a mounted result directory, and fails on: missing console
 #   script, Open MPI "Read -1, expected" noise, a non-writable cache, an image over 2.5 GB, a
@@ -13,15 +15,16 @@
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
-run_tests=0; keep=0
+run_tests=0; keep=0; releases=(trixie bookworm)
 for a in "$@"; do
   case "$a" in
     --tests) run_tests=1 ;;
     --keep-daemon) keep=1 ;;
-    *) echo "docker-check: unknown option $a (allowed: --tests, --keep-daemon)" >&2; exit 2 ;;
+    --release=trixie|--release=bookworm) releases=("${a#--release=}") ;;
+    *) echo "docker-check: unknown option $a (allowed: --tests, --keep-daemon, --release=trixie|bookworm)" >&2; exit 2 ;;
   esac
 done
-image="${HYDROBUCKLE_IMAGE:-hydrobuckle}"
+image_name="${HYDROBUCKLE_IMAGE:-hydrobuckle}"
 work="$(mktemp -d)"
 daemon_pid=""
 cleanup() {
@@ -52,80 +55,100 @@ if ! docker info >/dev/null 2>&1; then
   docker info >/dev/null 2>&1 || { echo "docker-check: dockerd did not start:"; tail -20 "$work/dockerd.log"; exit 1; }
 fi
 
-if ! docker image inspect debian:bookworm >/dev/null 2>&1; then
-  step "base image debian:bookworm"
-  if ! timeout 60 docker pull debian:bookworm >/dev/null 2>&1; then
-    t0=$(date +%s)
-    mirror=$(awk '/^URIs:/ && $2 ~ /\/debian\/?$/ {print $2; exit}' /etc/apt/sources.list.d/*.sources 2>/dev/null || true)
-    [ -n "$mirror" ] || mirror=$(awk '$1 == "deb" && $3 == "bookworm" {print $2; exit}' /etc/apt/sources.list 2>/dev/null || true)
-    [ -n "$mirror" ] || mirror="http://deb.debian.org/debian"
-    echo "docker-check: cannot pull; debootstrap --variant=minbase bookworm from $mirror"
-    debootstrap --variant=minbase bookworm "$work/rootfs" "$mirror" >"$work/debootstrap.log" 2>&1 \
-      || { tail -20 "$work/debootstrap.log"; exit 1; }
-    # the same suites as the host's apt (updates, security), so the image gets the same versions
-    if [ -f /etc/apt/sources.list.d/debian.sources ]; then
-      cp /etc/apt/sources.list.d/debian.sources "$work/rootfs/etc/apt/sources.list.d/"
-      rm -f "$work/rootfs/etc/apt/sources.list"
-    fi
-    rm -rf "$work/rootfs/var/cache/apt/archives/"*.deb "$work/rootfs/var/lib/apt/lists/"*
-    tar -C "$work/rootfs" -c . | docker import - debian:bookworm >/dev/null
-    rm -rf "$work/rootfs"
-    echo "docker-check: base image imported in $(seconds "$t0") s"
-  fi
-fi
-
-step "docker build -t $image ."
-t0=$(date +%s)
-docker build -t "$image" . 2>&1 | tee "$work/build.log" | grep -E '^(Step|#[0-9]+ \[|Successfully)|warmup:|install:' || true
-[ "${PIPESTATUS[0]}" -eq 0 ] || { tail -30 "$work/build.log"; exit 1; }
-echo "docker-check: build $(seconds "$t0") s"
-size=$(docker image inspect "$image" --format '{{.Size}}')
-echo "docker-check: image size $(( size / 1000000 )) MB"
-[ "$size" -lt 2500000000 ] || { echo "docker-check: FAIL image larger than 2.5 GB"; exit 1; }
-
-step "docker run --rm $image version"
-docker run --rm "$image" version | tee "$work/version.txt"
-grep -q "^dolfinx 0.5" "$work/version.txt" || { echo "docker-check: FAIL version"; exit 1; }
-
-small=(--set mesh.element_size=0.02 --set mesh.film_layers=2 --set geometry.length=0.4
-       --set geometry.substrate_thickness=0.2 --set stability.error_estimate=false --set output.every=2)
-check_run() {  # $1: label, $2: result dir on the host, rest: docker run options
-  local label=$1 dir=$2; shift 2
+make_base() {  # $1: codename; debian:$1 pulled, or built with debootstrap (minbase) and imported
+  local codename=$1
+  docker image inspect "debian:$codename" >/dev/null 2>&1 && return 0
+  step "base image debian:$codename"
+  timeout 60 docker pull "debian:$codename" >/dev/null 2>&1 && return 0
   local t0; t0=$(date +%s)
-  docker run --rm "$@" -v "$dir:/opt/hydrobuckle/results" "$image" \
-    mpirun -n 2 hydrobuckle run configs/bilayer.toml "${small[@]}" >"$work/$label.log" 2>&1 \
-    || { echo "docker-check: FAIL ($label) exit $?"; tail -20 "$work/$label.log"; exit 1; }
-  local secs; secs=$(seconds "$t0")
-  if grep -q "Read -1, expected" "$work/$label.log"; then
-    echo "docker-check: FAIL ($label) Open MPI single-copy noise: $(grep -c 'Read -1' "$work/$label.log") lines"; exit 1
+  local mirror
+  mirror=$(awk '/^URIs:/ && $2 ~ /\/debian\/?$/ {print $2; exit}' /etc/apt/sources.list.d/*.sources 2>/dev/null || true)
+  [ -n "$mirror" ] || mirror=$(awk '$1 == "deb" && $2 ~ /\/debian\/?$/ {print $2; exit}' /etc/apt/sources.list 2>/dev/null || true)
+  [ -n "$mirror" ] || mirror="http://deb.debian.org/debian"
+  echo "docker-check: cannot pull; debootstrap --variant=minbase $codename from $mirror"
+  rm -rf "$work/rootfs"
+  debootstrap --variant=minbase "$codename" "$work/rootfs" "$mirror" >"$work/debootstrap.log" 2>&1 \
+    || { tail -20 "$work/debootstrap.log"; exit 1; }
+  # the same suites as the host's apt (updates, security), renamed to this release
+  local host_codename; host_codename=$(. /etc/os-release && echo "$VERSION_CODENAME")
+  if [ -f /etc/apt/sources.list.d/debian.sources ]; then
+    sed "s/\b$host_codename\b/$codename/g" /etc/apt/sources.list.d/debian.sources \
+      >"$work/rootfs/etc/apt/sources.list.d/debian.sources"
+    rm -f "$work/rootfs/etc/apt/sources.list"
   fi
-  if grep -qi "permission denied" "$work/$label.log"; then
-    echo "docker-check: FAIL ($label) permission denied:"; grep -i "permission denied" "$work/$label.log" | head -3; exit 1
-  fi
-  local status; status=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" \
-    "$dir/bilayer/summary.json")
-  [ "$status" = "buckled" ] || { echo "docker-check: FAIL ($label) status $status"; exit 1; }
-  echo "docker-check: ($label) mpirun -n 2 hydrobuckle run ok in $secs s: $(grep 'critical growth' "$work/$label.log" | sed 's/.*hydrobuckle: //')"
-  echo "docker-check: ($label) result files owned by $(stat -c %u:%g "$dir/bilayer/summary.json")"
+  rm -rf "$work/rootfs/var/cache/apt/archives/"*.deb "$work/rootfs/var/lib/apt/lists/"*
+  tar -C "$work/rootfs" -c . | docker import - "debian:$codename" >/dev/null
+  rm -rf "$work/rootfs"
+  echo "docker-check: base image debian:$codename imported in $(seconds "$t0") s"
 }
 
-step "docker run (root) mpirun -n 2 hydrobuckle run configs/bilayer.toml (small mesh)"
-mkdir -p "$work/results-root"
-check_run root "$work/results-root"
+check_image() {  # $1: codename, $2: the dolfinx version its image must report
+  local codename=$1 want=$2
+  local image="$image_name:$codename"
+  make_base "$codename"
+  step "docker build --build-arg BASE=debian:$codename -t $image ."
+  local t0; t0=$(date +%s)
+  docker build --build-arg "BASE=debian:$codename" -t "$image" . 2>&1 | tee "$work/build.log" | grep -E '^(Step|#[0-9]+ \[|Successfully)|warmup:|install:' || true
+  [ "${PIPESTATUS[0]}" -eq 0 ] || { tail -30 "$work/build.log"; exit 1; }
+  echo "docker-check: build $(seconds "$t0") s"
+  local size; size=$(docker image inspect "$image" --format '{{.Size}}')
+  echo "docker-check: image size $(( size / 1000000 )) MB"
+  [ "$size" -lt 2500000000 ] || { echo "docker-check: FAIL image larger than 2.5 GB"; exit 1; }
 
-step "docker run --user 1000:1000 (a non-root user) with a mounted result directory"
-mkdir -p "$work/results-user" && chown 1000:1000 "$work/results-user"
-check_run user "$work/results-user" --user 1000:1000
-[ "$(stat -c %u "$work/results-user/bilayer/summary.json")" = "1000" ] \
-  || { echo "docker-check: FAIL result files not owned by the --user uid"; exit 1; }
+  step "docker run --rm $image version"
+  docker run --rm "$image" version | tee "$work/version.txt"
+  grep -q "^dolfinx $want" "$work/version.txt" || { echo "docker-check: FAIL version"; exit 1; }
 
-if [ "$run_tests" -eq 1 ]; then
-  step "test suite inside the image (serial and 2 ranks)"
-  t0=$(date +%s)
-  docker run --rm "$image" bash scripts/test.sh >"$work/tests.log" 2>&1 \
-    || { echo "docker-check: FAIL tests"; tail -40 "$work/tests.log"; exit 1; }
-  grep -E "passed|failed" "$work/tests.log" | tail -2
-  echo "docker-check: tests $(seconds "$t0") s"
-fi
+  small=(--set mesh.element_size=0.02 --set mesh.film_layers=2 --set geometry.length=0.4
+         --set geometry.substrate_thickness=0.2 --set stability.error_estimate=false --set output.every=2)
+  check_run() {  # $1: label, $2: result dir on the host, rest: docker run options
+    local label=$1 dir=$2; shift 2
+    local t0; t0=$(date +%s)
+    docker run --rm "$@" -v "$dir:/opt/hydrobuckle/results" "$image" \
+      mpirun -n 2 hydrobuckle run configs/bilayer.toml "${small[@]}" >"$work/$label.log" 2>&1 \
+      || { echo "docker-check: FAIL ($label) exit $?"; tail -20 "$work/$label.log"; exit 1; }
+    local secs; secs=$(seconds "$t0")
+    if grep -q "Read -1, expected" "$work/$label.log"; then
+      echo "docker-check: FAIL ($label) Open MPI single-copy noise: $(grep -c 'Read -1' "$work/$label.log") lines"; exit 1
+    fi
+    if grep -qi "permission denied" "$work/$label.log"; then
+      echo "docker-check: FAIL ($label) permission denied:"; grep -i "permission denied" "$work/$label.log" | head -3; exit 1
+    fi
+    local status; status=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['status'])" \
+      "$dir/bilayer/summary.json")
+    [ "$status" = "buckled" ] || { echo "docker-check: FAIL ($label) status $status"; exit 1; }
+    echo "docker-check: ($label) mpirun -n 2 hydrobuckle run ok in $secs s: $(grep 'critical growth' "$work/$label.log" | sed 's/.*hydrobuckle: //')"
+    echo "docker-check: ($label) result files owned by $(stat -c %u:%g "$dir/bilayer/summary.json")"
+  }
+
+  step "docker run (root) mpirun -n 2 hydrobuckle run configs/bilayer.toml (small mesh)"
+  mkdir -p "$work/results-root-$codename"
+  check_run "root-$codename" "$work/results-root-$codename"
+
+  step "docker run --user 1000:1000 (a non-root user) with a mounted result directory"
+  mkdir -p "$work/results-user-$codename" && chown 1000:1000 "$work/results-user-$codename"
+  check_run "user-$codename" "$work/results-user-$codename" --user 1000:1000
+  [ "$(stat -c %u "$work/results-user-$codename/bilayer/summary.json")" = "1000" ] \
+    || { echo "docker-check: FAIL result files not owned by the --user uid"; exit 1; }
+
+  if [ "$run_tests" -eq 1 ]; then
+    step "test suite inside $image (serial and 2 ranks)"
+    t0=$(date +%s)
+    docker run --rm "$image" bash scripts/test.sh >"$work/tests-$codename.log" 2>&1 \
+      || { echo "docker-check: FAIL tests"; tail -40 "$work/tests-$codename.log"; exit 1; }
+    grep -E "passed|failed" "$work/tests-$codename.log" | tail -2
+    echo "docker-check: tests $(seconds "$t0") s"
+  fi
+  echo "docker-check: $image ($codename, dolfinx $want) passed"
+}
+
+for codename in "${releases[@]}"; do
+  case "$codename" in
+    trixie) check_image trixie 0.9 ;;
+    bookworm) check_image bookworm 0.5 ;;
+  esac
+done
+# the default tag is the default build (Debian 13)
+if docker image inspect "$image_name:trixie" >/dev/null 2>&1; then docker tag "$image_name:trixie" "$image_name"; fi
 echo
 echo "docker-check: all checks passed"

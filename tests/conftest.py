@@ -93,7 +93,44 @@ def _venv_bin() -> Path:
 
 EXE = str(_venv_bin() / "hydrobuckle")  # the console script
 PYTHON = str(_venv_bin() / "python")
-MPIRUN = ["mpirun", "-q", "-n", "2", "--oversubscribe"]  # -q: no Open MPI banner after a non-zero exit
+
+
+def _open_mpi_major() -> int:
+    import re
+    import subprocess
+
+    try:
+        out = subprocess.run(["mpirun", "--version"], capture_output=True, text=True, timeout=60,
+                             env=child_env()).stdout
+    except (OSError, subprocess.SubprocessError):
+        return 0
+    m = re.search(r"Open MPI\)?\s+(\d+)\.", out)
+    return int(m.group(1)) if m else 0
+
+
+def launcher_quiet() -> list[str]:
+    """mpirun's option that keeps its own banner after a rank's non-zero exit off stderr: ``-q`` in Open
+    MPI 4 (Debian 12); Open MPI 5 (Debian 13) has none (see :func:`ours`)."""
+    return ["-q"] if _open_mpi_major() < 5 else []
+
+
+def ours(stderr: str) -> list[str]:
+    """stderr's lines without the block Open MPI 5's launcher adds after a rank's non-zero exit ("prterun
+    detected that one or more processes exited with non-zero status", between dashed rules): what
+    hydrobuckle itself said."""
+    out, block, skipping = [], [], False
+    for line in stderr.splitlines():
+        if line.startswith("-" * 20):
+            if skipping:
+                skipping = False
+                if not any("exited with non-zero status" in b for b in block):
+                    out.extend(block + [line])
+                block = []
+            else:
+                skipping, block = True, [line]
+            continue
+        (block if skipping else out).append(line)
+    return out + block
 
 
 def child_env() -> dict:
@@ -106,6 +143,9 @@ def child_env() -> dict:
     env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1",
                OPENBLAS_NUM_THREADS="1", OMPI_MCA_rmaps_base_oversubscribe="1")
     return env
+
+
+MPIRUN = ["mpirun", *launcher_quiet(), "-n", "2", "--oversubscribe"]
 
 
 def on_rank0(fn, *args, **kwargs):
