@@ -59,7 +59,8 @@ def ellipse_normal(a: float, b: float, phi):
 
 def ellipse_perimeter(a: float, b: float, samples: int = 20001) -> float:
     phi = np.linspace(0, 2 * np.pi, samples)
-    return float(np.trapz(np.hypot(b * np.sin(phi), a * np.cos(phi)), phi))
+    trapezoid = getattr(np, "trapezoid", None) or np.trapz  # numpy 2 renamed it (Debian 13), 1.x has trapz only
+    return float(trapezoid(np.hypot(b * np.sin(phi), a * np.cos(phi)), phi))
 
 
 def quadrant_parameters(a: float, b: float, m: int) -> np.ndarray:

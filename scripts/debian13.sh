@@ -45,26 +45,47 @@ PY
   touch "$root/.hydrobuckle-base"
 fi
 
-mounted=()
-cleanup() {
-  local i
-  for ((i = ${#mounted[@]} - 1; i >= 0; i--)); do umount -l "${mounted[$i]}" 2>/dev/null || true; done
-}
-trap cleanup EXIT
-mountpoint -q "$root/proc" || { mount -t proc proc "$root/proc"; mounted+=("$root/proc"); }
+# The mounts live in a mount namespace of this invocation's own (unshare): gone when it ends, and
+# invocations running at the same time do not share or undo each other's.
+if [ -z "${HYDROBUCKLE_DEBIAN13_NS:-}" ]; then
+  HYDROBUCKLE_DEBIAN13_NS=1 exec unshare --mount --propagation private -- bash "${BASH_SOURCE[0]}" "$@"
+fi
+mount -t proc proc "$root/proc"
 for d in dev sys; do
-  mountpoint -q "$root/$d" || { mount --rbind "/$d" "$root/$d"; mount --make-rslave "$root/$d"; mounted+=("$root/$d"); }
+  mount --rbind "/$d" "$root/$d"
 done
 mkdir -p "$root/hydrobuckle" "$root/opt/hydrobuckle-venv"
-mountpoint -q "$root/hydrobuckle" || { mount --bind "$here" "$root/hydrobuckle"; mounted+=("$root/hydrobuckle"); }
+mount --bind "$here" "$root/hydrobuckle"
 # The checkout's .venv is this machine's; inside the root, .venv is the root's own venv (mounted
 # over it in the root only), so the README's commands run unchanged on both.
 mkdir -p "$here/.venv"
-mountpoint -q "$root/hydrobuckle/.venv" || {
-  mount --bind "$root/opt/hydrobuckle-venv" "$root/hydrobuckle/.venv"; mounted+=("$root/hydrobuckle/.venv"); }
+mount --bind "$root/opt/hydrobuckle-venv" "$root/hydrobuckle/.venv"
 cp -L /etc/resolv.conf "$root/etc/resolv.conf" 2>/dev/null || true
 
-# git refuses a checkout owned by another uid unless told it is safe (the bind mount keeps owners).
-chroot "$root" /usr/bin/env -i HOME=/root PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
-  LANG=C.UTF-8 CI="${CI:-}" OMPI_ALLOW_RUN_AS_ROOT=1 \
-  OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 bash -c 'cd /hydrobuckle && exec "$@"' debian13 "$@"
+# A clean environment in the root; hydrobuckle's own switches (HYDROBUCKLE_TEST_PARTS, _NO_WARMUP, ...)
+# pass through, except the venv (the root has its own) and this script's.
+pass=()
+while IFS='=' read -r name _; do
+  case "$name" in
+    HYDROBUCKLE_VENV|HYDROBUCKLE_DEBIAN13_*) ;;
+    HYDROBUCKLE_*) pass+=("$name=${!name}") ;;
+  esac
+done < <(env)
+in_root() {
+  chroot "$root" /usr/bin/env -i HOME=/root PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
+    LANG=C.UTF-8 CI="${CI:-}" OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "${pass[@]}" \
+    bash -c 'cd /hydrobuckle && exec "$@"' debian13 "$@"
+}
+
+# The system packages (scripts/apt-packages.txt): quick when they are there already. When apt cannot
+# fetch them because the mirror is unreachable, the environment cannot be built: exit 75.
+if ! in_root bash scripts/apt-install.sh; then
+  python3 - "$mirror" <<'PY' || unreachable "apt-get could not fetch the packages"
+import sys, urllib.request
+urllib.request.urlopen(sys.argv[1].rstrip("/") + "/dists/trixie/Release", timeout=20).read(64)
+PY
+  echo "debian13: apt-get install of scripts/apt-packages.txt failed in $root" >&2
+  exit 1
+fi
+
+in_root "$@"

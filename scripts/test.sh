@@ -2,14 +2,19 @@
 # Install what is missing, then run the test suite serially and under `mpirun -n 2`.
 # Any failure, including "no tests collected" (pytest exit code 5), fails the script.
 # Extra arguments go to pytest (e.g. `scripts/test.sh -k config`).
+#   HYDROBUCKLE_TEST_PARTS=serial|mpi   only that half (.ci/run runs the halves of two stacks in turn)
 set -euo pipefail
+parts="${HYDROBUCKLE_TEST_PARTS:-serial mpi}"
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 bash scripts/install.sh
 source scripts/mpi-env.sh
 
-echo "== pytest, serial"
-"$here/.venv/bin/python" -m pytest -q -p no:cacheprovider --color=no "$@"
-
-echo "== pytest, mpirun -n 2"
-mpirun -n 2 $HB_MPIRUN_FLAGS bash scripts/pytest-rank.sh "$@"
+if [[ " $parts " == *" serial "* ]]; then
+  echo "== pytest, serial"
+  "$here/.venv/bin/python" -m pytest -q -p no:cacheprovider --color=no "$@"
+fi
+if [[ " $parts " == *" mpi "* ]]; then
+  echo "== pytest, mpirun -n 2"
+  mpirun -n 2 $HB_MPIRUN_FLAGS bash scripts/pytest-rank.sh "$@"
+fi

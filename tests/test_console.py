@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import json
 import subprocess
+import sys
+from pathlib import Path
 
 import dolfinx
 import pytest
-from conftest import REPO, child_env, launcher_quiet, on_rank0, ours
+from conftest import EXE, REPO, child_env, launcher_quiet, on_rank0, ours
 from mpi4py import MPI
 
 # The demo's config (configs/bilayer.toml) shrunk to a 0.3 mm wide strip: seconds, still buckles.
@@ -21,10 +23,18 @@ SMALL = ["--set", "geometry.length=0.3", "--set", "geometry.substrate_thickness=
          "--set", "stability.error_estimate=false", "--set", "time.dt_max=0.05"]
 
 
+# scripts/install.sh and demo.sh are for the Debian packages and the checkout's .venv; with your own
+# FEniCSx (README, "Your own FEniCSx") the suite runs from your environment and skips their tests
+DEBIAN_INSTALL = Path(sys.prefix).resolve() == (REPO / ".venv").resolve()
+debian_scripts = pytest.mark.skipif(not DEBIAN_INSTALL, reason="scripts/install.sh and demo.sh: the checkout's "
+                                    ".venv over the Debian packages, not this environment")
+
+
 def _run(cmd, cwd, timeout=600):
     return subprocess.run(cmd, cwd=cwd, env=child_env(), capture_output=True, text=True, timeout=timeout)
 
 
+@debian_scripts
 def test_demo_script_runs_console_script_on_two_ranks(shared_tmp, comm):
     """`bash scripts/demo.sh` (install check + `mpirun -n 2 .venv/bin/hydrobuckle run`) from another
     directory; its g_c equals the in-process serial run of the same resolved config (1 vs 2 ranks)."""
@@ -56,7 +66,7 @@ def test_console_script_exit_codes_from_any_directory(shared_tmp):
     if MPI.COMM_WORLD.rank == 0:
         bad.write_text("[geometry]\nsubstrate_thickness = -1\n")
     MPI.COMM_WORLD.barrier()
-    exe = str(REPO / ".venv" / "bin" / "hydrobuckle")
+    exe = EXE
     # without launcher_quiet() (Open MPI 4) mpirun adds its own banner about a rank's non-zero exit;
     # Open MPI 5 always does, and ours() leaves it out
     proc = on_rank0(_run, ["mpirun", *launcher_quiet(), "-n", "2", exe, "run", str(bad), "-o", str(out)], cwd="/")
@@ -68,6 +78,7 @@ def test_console_script_exit_codes_from_any_directory(shared_tmp):
     assert ver.returncode == 0 and f"dolfinx {dolfinx.__version__}" in ver.stdout
 
 
+@debian_scripts
 def test_install_into_fresh_venv_creates_console_script(shared_tmp):
     """scripts/install.sh, started from the checkout's root (where `import app` works without any
     install), must still install hydrobuckle into a fresh venv and create its console script; a
@@ -91,3 +102,25 @@ def _install_twice(venv):
     assert again.returncode == 0 and "installing" not in again.stdout
 
 
+
+
+def test_pip_install_into_an_environment_that_has_dolfinx(shared_tmp):
+    """A user's own FEniCSx (README, "Your own FEniCSx"): `pip install -e .` into an environment that sees
+    dolfinx, no apt and no scripts: it fetches nothing (hydrobuckle declares no pip dependencies, so pip
+    cannot replace the user's stack), and the console script it makes reports the dolfinx of that
+    environment and runs a command from any directory."""
+    on_rank0(_pip_install, shared_tmp / "own-env")
+
+
+def _pip_install(venv):
+    env = {**child_env(), "PIP_NO_INDEX": "1"}  # nothing may come from an index
+    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True, timeout=300)
+    pip = subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--no-build-isolation", "-e",
+                          str(REPO)], cwd="/", env=env, capture_output=True, text=True, timeout=600)
+    assert pip.returncode == 0, pip.stdout[-2000:] + pip.stderr[-2000:]
+    ver = subprocess.run([str(venv / "bin" / "hydrobuckle"), "version"], cwd="/", env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert ver.returncode == 0 and f"dolfinx {dolfinx.__version__}" in ver.stdout, ver.stdout + ver.stderr
+    val = subprocess.run([str(venv / "bin" / "hydrobuckle"), "validate", str(REPO / "configs" / "bilayer.toml")],
+                         cwd="/", env=env, capture_output=True, text=True, timeout=300)
+    assert val.returncode == 0, val.stdout[-2000:] + val.stderr[-2000:]

@@ -66,6 +66,7 @@ class NewtonSolver:
         self.b = compat.create_vector(residual)
         self.x = self.b.duplicate()
         self._g = self.b.duplicate()  # Dirichlet values at the constrained dofs, 0 elsewhere
+        self._x_prev, self._dx = self.b.duplicate(), self.b.duplicate()  # the last iterate, the update taken
         self._bc_dofs = compat.owned_bc_dofs(bcs, w.function_space)
         self._lifting = True
         linear = settings.linear
@@ -166,8 +167,13 @@ class NewtonSolver:
         roundoff (|dx| <= 1e3 eps |x|), or if the residual stagnated (fell by less than 2 in the last
         iteration) at a level below rtol times the problem's scale (the initial residual norm of the
         solver's first solve, the run's first step). Normal steps converge by the default rules first,
-        with their iteration counts unchanged."""
-        xnorm, ynorm, fnorm = norms
+        with their iteration counts unchanged.
+
+        |dx| is the update actually taken, measured here from the iterates: the norm PETSc reports after
+        a backtracking line search is the scaled step in PETSc 3.18 but the full Newton direction in
+        3.22, which would make the roundoff rule fire on one stack and not on the other."""
+        xnorm, _, fnorm = norms
+        ynorm = self._update_norm(it)
         rtol, atol, max_funcs = self._tol
         if it == 0:
             self._ttol, self._rnorm0 = fnorm * rtol, fnorm
@@ -192,6 +198,16 @@ class NewtonSolver:
                 out = reason.DIVERGED_DTOL
         self._fprev = fnorm
         return out
+
+    def _update_norm(self, it: int) -> float:
+        """|x_it - x_(it-1)| of the iterates of this solve (0 at it = 0)."""
+        x = self.x
+        if it == 0:
+            x.copy(self._x_prev)
+            return 0.0
+        self._dx.waxpy(-1.0, self._x_prev, x)
+        x.copy(self._x_prev)
+        return self._dx.norm()
 
     def _jacobian(self, snes, x, J, P):
         with timing.timed("assembly"):
@@ -247,5 +263,5 @@ class NewtonSolver:
 
     def destroy(self) -> None:
         self._options.clear()
-        for obj in (self.snes, self.A, self.b, self.x, self._g):
+        for obj in (self.snes, self.A, self.b, self.x, self._g, self._x_prev, self._dx):
             obj.destroy()
