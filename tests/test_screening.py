@@ -93,8 +93,14 @@ def test_criteria_are_ordered_and_rate_tends_to_the_limits(shared_tmp, comm, cas
         if a in exact:
             assert exact[a] <= (exact[b] if b in exact else lower[b]) * (1 + tol), (a, b, exact, lower)
     if case == "thick":  # slow gel: the drained onset comes long before any fast one
-        assert set(lower) == {"rate 1e-3", "undrained"}, (exact, lower)
-        assert exact["drained"] < 0.5 * lower["rate 1e-3"], (exact, lower)
+        # rate 1e-3 is undrained to 1e-8 here: its onset and the loss of the fundamental path (at the
+        # undrained limit) are 4e-8 apart in time, so which one the run meets first is decided by roundoff
+        # (dolfinx 0.5: the path; 0.9: the onset, 236.751883 s against the path's 236.751892 s)
+        assert "undrained" in lower and "rate 1e-3" in {**exact, **lower}, (exact, lower)
+        assert set(lower) <= {"rate 1e-3", "undrained"}, (exact, lower)
+        fast = exact.get("rate 1e-3", lower.get("rate 1e-3"))
+        assert fast == pytest.approx(lower["undrained"], rel=1e-6), (exact, lower)
+        assert exact["drained"] < 0.5 * fast, (exact, lower)
     else:
         assert not lower and set(exact) == set(order) | {"rate 1e6"}
 

@@ -128,7 +128,7 @@ def _polar_tube_msh(path, r, w, R, n_around, film_layers, substrate_layers, grad
     def node(i, j):
         return j * n_around + i % n_around + 1
 
-    nodes = [f"{node(i, j)} {rho * math.cos(th)!r} {rho * math.sin(th)!r} 0"
+    nodes = [f"{node(i, j)} {float(rho * math.cos(th))!r} {float(rho * math.sin(th))!r} 0"
              for j, rho in enumerate(radii) for i, th in enumerate(theta)]
     elements = [f"3 2 {1 if j < film_layers else 2} {1 if j < film_layers else 2} "
                 f"{node(i, j)} {node(i + 1, j)} {node(i + 1, j + 1)} {node(i, j + 1)}"

@@ -15,6 +15,7 @@ import copy
 import csv
 import json
 import math
+import numbers
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -134,6 +135,10 @@ def _toml(v) -> str:
         return '"' + v + '"'
     if isinstance(v, bool):
         return "true" if v else "false"
+    if isinstance(v, numbers.Integral):
+        return str(int(v))
+    if isinstance(v, numbers.Real):
+        return repr(float(v))  # a numpy float's repr is "np.float64(...)" under numpy 2
     return repr(v)
 
 
