@@ -89,18 +89,19 @@ def test_criteria_are_ordered_and_rate_tends_to_the_limits(shared_tmp, comm, cas
     tol = swelling_case()["stability"]["tolerance"]
     assert exact["rate 1e6"] == pytest.approx(exact["drained"], rel=tol)
     order = ("drained", "rate 1", "rate 1e-3", "undrained")
-    for a, b in zip(order, order[1:]):  # a's onset <= b's: against b's onset, or b's lower bound
-        if a in exact:
-            assert exact[a] <= (exact[b] if b in exact else lower[b]) * (1 + tol), (a, b, exact, lower)
+    found = [n for n in order if n in exact]
+    for a, b in zip(found, found[1:]):  # a's onset <= b's where both runs reached theirs
+        assert exact[a] <= exact[b] * (1 + tol), (a, b, exact, lower)
     if case == "thick":  # slow gel: the drained onset comes long before any fast one
-        # rate 1e-3 is undrained to 1e-8 here: its onset and the loss of the fundamental path (at the
-        # undrained limit) are 4e-8 apart in time, so which one the run meets first is decided by roundoff
-        # (dolfinx 0.5: the path; 0.9: the onset, 236.751883 s against the path's 236.751892 s)
-        assert "undrained" in lower and "rate 1e-3" in {**exact, **lower}, (exact, lower)
-        assert set(lower) <= {"rate 1e-3", "undrained"}, (exact, lower)
-        fast = exact.get("rate 1e-3", lower.get("rate 1e-3"))
-        assert fast == pytest.approx(lower["undrained"], rel=1e-6), (exact, lower)
-        assert exact["drained"] < 0.5 * fast, (exact, lower)
+        # Past the drained onset (75.8 s) the fast criteria's runs follow the drained-unstable fundamental
+        # path until Newton loses it; where that happens is decided by roundoff (measured 236.75 s serially
+        # on either stack, 237.74 s on 2 ranks), and the rate 1e-3 onset lies right there (236.751883 s on
+        # dolfinx 0.9 against the path's 236.751892 s; 238.13 s on 2 ranks, past the undrained run's
+        # 237.74 s). So the rate 1e-3 run may end either way; the undrained one always loses the path first.
+        # An onset is compared only with onsets (a lower bound says nothing about another run's onset).
+        assert "undrained" in lower and set(lower) <= {"rate 1e-3", "undrained"}, (exact, lower)
+        fast = {**lower, **exact}
+        assert exact["drained"] < 0.5 * min(fast["rate 1e-3"], fast["undrained"]), (exact, lower)
     else:
         assert not lower and set(exact) == set(order) | {"rate 1e6"}
 
