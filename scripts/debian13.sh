@@ -8,7 +8,7 @@
 # The checkout is bind-mounted at /hydrobuckle; its .venv there is the root's own
 # (/opt/hydrobuckle-venv in the root), so it never mixes with this machine's .venv.
 # Exit codes: the command's; 75 when the root cannot be built because the mirror is unreachable
-# (one line says so).
+# (one line says so). HYDROBUCKLE_DEBIAN_MIRROR=URL builds from another mirror.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 root="${HYDROBUCKLE_DEBIAN13_ROOT:-/var/cache/hydrobuckle/debian13}"
@@ -20,7 +20,7 @@ mirror=$(sed -n 's/^URIs:[[:space:]]*\([^[:space:]]*\/debian\)[[:space:]]*$/\1/p
            /etc/apt/sources.list.d/*.sources 2>/dev/null | head -n1)
 [ -n "$mirror" ] || mirror=$(awk '$1 == "deb" && $2 ~ /\/debian\/?$/ {print $2; exit}' \
                              /etc/apt/sources.list /etc/apt/sources.list.d/*.list 2>/dev/null || true)
-mirror="${mirror:-http://deb.debian.org/debian}"
+mirror="${HYDROBUCKLE_DEBIAN_MIRROR:-${mirror:-http://deb.debian.org/debian}}"  # the variable: another mirror
 
 unreachable() {
   echo "debian13: the Debian mirror $mirror is unreachable ($1); the Debian 13 environment is skipped" >&2
@@ -31,7 +31,7 @@ if [ ! -e "$root/.hydrobuckle-base" ]; then
   command -v debootstrap >/dev/null || {
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends debootstrap >/dev/null \
       || unreachable "apt-get install debootstrap failed"; }
-  python3 - "$mirror" <<'PY' || unreachable "no answer from $mirror/dists/trixie/Release"
+  python3 - "$mirror" 2>/dev/null <<'PY' || unreachable "no answer from $mirror/dists/trixie/Release"
 import sys, urllib.request
 urllib.request.urlopen(sys.argv[1].rstrip("/") + "/dists/trixie/Release", timeout=20).read(64)
 PY
@@ -80,7 +80,7 @@ in_root() {
 # The system packages (scripts/apt-packages.txt): quick when they are there already. When apt cannot
 # fetch them because the mirror is unreachable, the environment cannot be built: exit 75.
 if ! in_root bash scripts/apt-install.sh; then
-  python3 - "$mirror" <<'PY' || unreachable "apt-get could not fetch the packages"
+  python3 - "$mirror" 2>/dev/null <<'PY' || unreachable "apt-get could not fetch the packages"
 import sys, urllib.request
 urllib.request.urlopen(sys.argv[1].rstrip("/") + "/dists/trixie/Release", timeout=20).read(64)
 PY
