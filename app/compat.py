@@ -147,6 +147,9 @@ def global_size(V) -> int:
 
 def gmsh_model_to_mesh(model, comm, rank: int = 0, gdim: int = 2):
     """(mesh, cell_tags, facet_tags) from a gmsh model that lives on ``rank``."""
+    if MODERN:  # 0.5's default: ghost cells across shared facets (interior-facet integrals need them)
+        partitioner = dmesh.create_cell_partitioner(dmesh.GhostMode.shared_facet)
+        return gmshio.model_to_mesh(model, comm, rank, gdim=gdim, partitioner=partitioner)
     return gmshio.model_to_mesh(model, comm, rank, gdim=gdim)
 
 

@@ -144,9 +144,9 @@ def test_failing_steps_past_the_onset_are_diagnosed_not_cut_to_dt_min(comm, shar
     assert float(rows[-1]["time"]) == pytest.approx(counts["t"]) == pytest.approx(summary["final"]["time"])
     assert len(rows) == summary["steps"] + 1 > 50  # the history up to the failure is kept
     # single failures recovered by one cut-back on the steps before (the path is past its onset, a saddle, where
-    # Newton is sensitive to roundoff): measured 8 serially, 8 to 11 on 2 ranks run to run; one spiral to
-    # dt_min alone would be 19 or more
-    assert summary["failed_solves"] <= 14
+    # Newton is sensitive to roundoff): measured 8 serially, 8 to 11 on 2 ranks run to run (dolfinx 0.5), 16 on
+    # 2 ranks with dolfinx 0.9; one spiral to dt_min alone would be 19 or more
+    assert summary["failed_solves"] < 19
 
 
 def test_diagnosis_lets_the_cut_back_go_on_where_K_is_positive_definite(comm, monkeypatch):
