@@ -172,12 +172,10 @@ def vertex_to_geometry(domain) -> np.ndarray:
     tdim = domain.topology.dim
     domain.topology.create_connectivity(tdim, 0)
     c2v = domain.topology.connectivity(tdim, 0)
-    x_dofmap = domain.geometry.dofmap
     n_vertices = domain.topology.index_map(0).size_local + domain.topology.index_map(0).num_ghosts
     out = np.full(n_vertices, -1, dtype=np.int64)
-    n_cells = domain.topology.index_map(tdim).size_local + domain.topology.index_map(tdim).num_ghosts
-    nodes = _cells_by_row(x_dofmap, n_cells)
-    for c in range(n_cells):
+    nodes = cell_geometry_nodes(domain)
+    for c in range(nodes.shape[0]):
         out[c2v.links(c)] = nodes[c, :len(c2v.links(c))]
     return out
 
