@@ -610,6 +610,8 @@ def main(argv: list[str] | None = None) -> int:
     compat = sys.modules.get("app.compat")  # not imported: no HDF5 file was written
     if argv is None and compat is not None and compat.has_abandoned():
         compat.end_process(code)
+    if argv is None:
+        code = interrupt.leave(code)  # a multi-rank job: every rank done before one ends non-zero
     return code
 
 

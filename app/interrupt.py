@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import threading
+import time
 
 EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + signal number, as a shell reports it
 
@@ -82,3 +84,35 @@ def name(sig: int) -> str:
 def exit_code() -> int | None:
     """The exit code of an interrupted command (130 SIGINT, 143 SIGTERM), or None."""
     return EXIT_CODES.get(agreed) if agreed else None
+
+
+# How long rank 0 waits, after the other ranks were released, before it ends with a non-zero code.
+LEAVE_DELAY = 0.5
+
+
+def leave(code: int) -> int:
+    """The exit code this process should end with, after the ranks of a multi-rank job agreed to end.
+
+    Open MPI 5's launcher (Debian 13) tears the job down as soon as one process exits with a non-zero
+    code: a rank still writing summary.json or its one-line error was killed (measured: no summary.json
+    after SIGTERM, and ``PMIX ERROR: PMIX_ERR_UNREACH`` lines from a rank killed inside MPI_Finalize, in
+    most runs of a loaded 2-core machine). So on a non-zero code every rank first waits for the others
+    (a barrier: everything is written), the other ranks end with 0, and rank 0 ends with the code a
+    moment later, when they are gone. mpirun and srun report the code (the first / the largest non-zero).
+    Serial runs and code 0 are unchanged."""
+    mpi = sys.modules.get("mpi4py.MPI")
+    if code == 0 or mpi is None or not mpi.Is_initialized() or mpi.Is_finalized():
+        return code
+    comm = mpi.COMM_WORLD
+    if comm.size == 1:
+        return code
+    comm.barrier()
+    if comm.rank != 0:
+        return 0
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    time.sleep(LEAVE_DELAY)
+    return code

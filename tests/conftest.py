@@ -95,7 +95,8 @@ EXE = str(_venv_bin() / "hydrobuckle")  # the console script
 PYTHON = str(_venv_bin() / "python")
 
 
-def _open_mpi_major() -> int:
+def open_mpi_major() -> int:
+    """The major version of the Open MPI that `mpirun` starts (0: not Open MPI, or none)."""
     import re
     import subprocess
 
@@ -111,7 +112,7 @@ def _open_mpi_major() -> int:
 def launcher_quiet() -> list[str]:
     """mpirun's option that keeps its own banner after a rank's non-zero exit off stderr: ``-q`` in Open
     MPI 4 (Debian 12); Open MPI 5 (Debian 13) has none (see :func:`ours`)."""
-    return ["-q"] if _open_mpi_major() < 5 else []
+    return ["-q"] if open_mpi_major() < 5 else []
 
 
 def ours(stderr: str) -> list[str]:

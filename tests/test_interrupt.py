@@ -1,14 +1,17 @@
 """SIGINT / SIGTERM during a run (docs/reliability.md): the run stops between steps, keeps
 history.csv, writes summary.json with status "interrupted" and exits 130 / 143. Under mpirun the
-signal goes to mpirun, which forwards it to every rank (Open MPI 4.1 kills them 1 s later). Before
+signal goes to mpirun, which forwards it to every rank (Open MPI 4.1 kills them 1 s later, Open MPI 5
+0.25 s later); a scheduler signals the ranks themselves and leaves them the time they need. Before
 the ranks' output was sent to /dev/null on the signal, the mpirun case passed in some sessions and
 failed in 11 of 11 attempts in another (rank 0 blocked writing a progress line, no summary)."""
 
 from __future__ import annotations
 
+import os
 import signal
 
-from conftest import EXE, finish, on_rank0, read_json, start, valid_history, wait_rows
+from conftest import (EXE, finish, on_rank0, open_mpi_major, read_json, session_processes, start, valid_history,
+                      wait_rows)
 
 # a tiny homogeneous layer under a slow ramp (no onset, no failure) and a far end time: it runs until stopped
 LONG = """
@@ -84,11 +87,61 @@ def test_sigterm_serial_exits_143(shared_tmp):
     _check_results(out, "SIGTERM", ranks=1)
 
 
+def _rank_pids(proc) -> list[int]:
+    """The rank processes (hydrobuckle itself) among ``proc``'s session: not mpirun / prterun."""
+    pids = []
+    for pid in session_processes(proc):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                argv = f.read().split(b"\0")
+        except OSError:
+            continue
+        if argv and b"run" in argv and not any(w in argv[0] for w in (b"mpirun", b"prterun", b"orterun")):
+            pids.append(pid)
+    return pids
+
+
+def _signal_ranks(cmd, out, sig, rows=5):
+    """Start ``cmd`` (an mpirun job); as a scheduler's wall-time limit (srun, a batch system) does, ``sig``
+    to every rank (not to mpirun) once history.csv has ``rows`` data rows; the finished process."""
+    proc = start(cmd)
+    try:
+        wait_rows(proc, out / "history.csv", rows)
+        ranks = _rank_pids(proc)
+        assert len(ranks) == 2, ranks
+        for pid in ranks:
+            os.kill(pid, sig)
+    except BaseException:
+        finish(proc, timeout=0)
+        raise
+    return finish(proc, timeout=120)
+
+
+def test_sigterm_to_the_ranks_stops_both_collectively_and_mpirun_reports_143(shared_tmp):
+    """A scheduler's SIGTERM to both ranks of `mpirun -n 2 hydrobuckle run` (mpirun itself untouched, so
+    nothing kills the ranks while they finish): they agree (allreduce) to stop after the same step,
+    rank 0 writes summary.json ("interrupted"), and the job's code is 143 on Open MPI 4 and 5 alike
+    (rank 0 ends with it once the other rank has left: app.interrupt.leave)."""
+    cfg = shared_tmp / "long.toml"
+    out = shared_tmp / "ranks"
+    on_rank0(cfg.write_text, LONG)
+    cmd = ["mpirun", "-n", "2", "--oversubscribe", EXE, "run", str(cfg), "-o", str(out)]
+    code, stdout, stderr = on_rank0(_signal_ranks, cmd, out, signal.SIGTERM)
+    assert code == 143, stdout[-2000:] + stderr[-2000:]
+    assert "Traceback" not in stderr and "PMIX ERROR" not in stderr, stderr[-2000:]
+    _check_results(out, "SIGTERM", ranks=2)
+
+
 def test_sigterm_to_mpirun_stops_both_ranks_collectively(shared_tmp):
-    """SIGTERM to `mpirun -n 2 hydrobuckle run`: Open MPI forwards it to both ranks, which agree
-    (allreduce) to stop after the same step, write summary.json ("interrupted") and exit 143 each.
-    mpirun itself reports 1 (Open MPI 4.1.4 exits 1 whenever it was signalled, whatever its ranks
-    returned), so the ranks' behaviour is asserted through their files."""
+    """SIGTERM to `mpirun -n 2 hydrobuckle run`: mpirun forwards it to both ranks and kills them a fixed
+    time later (Open MPI 4.1: SIGKILL 1 s after the SIGTERM; Open MPI 5 / PRRTE 3: SIGCONT, 0.25 s, SIGTERM,
+    0.25 s, SIGKILL, hard-coded). Within that time the ranks agree to stop after the same step and write
+    summary.json ("interrupted"). Open MPI 4 leaves enough time for this tiny case (measured: every run);
+    Open MPI 5's 0.25 s does not on a loaded machine (measured on 2 cores with 3 busy processes: no summary
+    in 4 of 8 runs; the ranks' signal handler had not run before the SIGKILL), so there the test asserts
+    what always holds: history.csv has no torn row, no traceback, and a summary, if written, says
+    "interrupted". mpirun itself reports 1 whatever its ranks returned, so the ranks' behaviour is
+    asserted through their files."""
     cfg = shared_tmp / "long.toml"
     out = shared_tmp / "mpi"
     on_rank0(cfg.write_text, LONG)
@@ -98,4 +151,7 @@ def test_sigterm_to_mpirun_stops_both_ranks_collectively(shared_tmp):
     assert "Traceback" not in stderr
     # no "interrupted" line: Open MPI stops forwarding the ranks' output, which they send to /dev/null
     # once signalled (else rank 0 blocks writing a progress line until it is killed: no summary)
+    if open_mpi_major() >= 5 and not (out / "summary.json").exists():
+        assert len(valid_history(out / "history.csv")) >= 5  # the rows seen before the signal, none torn
+        return
     _check_results(out, "SIGTERM", ranks=2)
