@@ -22,6 +22,14 @@ mirror=$(sed -n 's/^URIs:[[:space:]]*\([^[:space:]]*\/debian\)[[:space:]]*$/\1/p
                              /etc/apt/sources.list /etc/apt/sources.list.d/*.list 2>/dev/null || true)
 mirror="${HYDROBUCKLE_DEBIAN_MIRROR:-${mirror:-http://deb.debian.org/debian}}"  # the variable: another mirror
 
+# Whether the mirror serves trixie's Release file (within 20 s).
+mirror_answers() {
+  python3 - "$mirror" 2>/dev/null <<'PY'
+import sys, urllib.request
+urllib.request.urlopen(sys.argv[1].rstrip("/") + "/dists/trixie/Release", timeout=20).read(64)
+PY
+}
+
 unreachable() {
   echo "debian13: the Debian mirror $mirror is unreachable ($1); the Debian 13 environment is skipped" >&2
   exit 75
@@ -31,10 +39,7 @@ if [ ! -e "$root/.hydrobuckle-base" ]; then
   command -v debootstrap >/dev/null || {
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends debootstrap >/dev/null \
       || unreachable "apt-get install debootstrap failed"; }
-  python3 - "$mirror" 2>/dev/null <<'PY' || unreachable "no answer from $mirror/dists/trixie/Release"
-import sys, urllib.request
-urllib.request.urlopen(sys.argv[1].rstrip("/") + "/dists/trixie/Release", timeout=20).read(64)
-PY
+  mirror_answers || unreachable "no answer from $mirror/dists/trixie/Release"
   echo "debian13: building a minimal trixie root in $root (about 2 minutes, once)"
   rm -rf "$root.part"
   mkdir -p "$(dirname "$root")"
@@ -80,10 +85,7 @@ in_root() {
 # The system packages (scripts/apt-packages.txt): quick when they are there already. When apt cannot
 # fetch them because the mirror is unreachable, the environment cannot be built: exit 75.
 if ! in_root bash scripts/apt-install.sh; then
-  python3 - "$mirror" 2>/dev/null <<'PY' || unreachable "apt-get could not fetch the packages"
-import sys, urllib.request
-urllib.request.urlopen(sys.argv[1].rstrip("/") + "/dists/trixie/Release", timeout=20).read(64)
-PY
+  mirror_answers || unreachable "apt-get could not fetch the packages"
   echo "debian13: apt-get install of scripts/apt-packages.txt failed in $root" >&2
   exit 1
 fi
