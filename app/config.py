@@ -487,7 +487,8 @@ def substrate_parameters(cfg: dict) -> dict:
 # --- TOML writing (tomllib reads only) -------------------------------------------------------
 
 
-def _toml_value(v: Any) -> str:
+def toml_value(v: Any) -> str:
+    """TOML text of one value: what dumps() writes and what a --set override takes."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, numbers.Integral):
@@ -497,7 +498,7 @@ def _toml_value(v: Any) -> str:
     if isinstance(v, str):
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
 
 
@@ -510,7 +511,7 @@ def dumps(cfg: dict) -> str:
         if prefix and (scalars or not d):  # an empty table (e.g. a material with no own keys) is kept
             lines.append(f"[{prefix}]")
         for k, v in scalars.items():
-            lines.append(f"{k} = {_toml_value(v)}")
+            lines.append(f"{k} = {toml_value(v)}")
         if scalars or (prefix and not d):
             lines.append("")
         for k, v in d.items():

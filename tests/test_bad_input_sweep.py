@@ -196,7 +196,7 @@ def _toml(user: dict) -> str:
     def val(v):
         if isinstance(v, dict):
             return "{ " + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + " }"
-        return config._toml_value(v)
+        return config.toml_value(v)
 
     for table, keys in user.items():
         lines.append(f"[{table}]")

@@ -15,7 +15,6 @@ import copy
 import csv
 import json
 import math
-import numbers
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -108,7 +107,7 @@ def build_cases(base_cfg_user: dict, param: str, values: list, outdir: Path, ove
     for s_label, s_over in (series or {"": {}}).items():
         for v in values:
             dotted = {**(dotted_base or {}), **s_over, param: v}
-            items = [f"{k}={_toml(val)}" for k, val in dotted.items()] + list(overrides)
+            items = [f"{k}={config.toml_value(val)}" for k, val in dotted.items()] + list(overrides)
             try:
                 cfg = config.resolve(copy.deepcopy(base_cfg_user), items)
             except config.ConfigError as err:
@@ -128,18 +127,6 @@ def build_cases(base_cfg_user: dict, param: str, values: list, outdir: Path, ove
             label = (f"{s_label}_" if s_label else "") + f"{param.split('.')[-1]}={_format_value(v)}"
             cases.append(Case(label, s_label, v, cfg, outdir / label))
     return cases
-
-
-def _toml(v) -> str:
-    if isinstance(v, str):
-        return '"' + v + '"'
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, numbers.Integral):
-        return str(int(v))
-    if isinstance(v, numbers.Real):
-        return repr(float(v))  # a numpy float's repr is "np.float64(...)" under numpy 2
-    return repr(v)
 
 
 def is_complete(case: Case, solver: str = "2d") -> bool:
