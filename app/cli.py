@@ -608,10 +608,10 @@ def main(argv: list[str] | None = None) -> int:
 
     code = interrupt.exit_code() or code  # 130 / 143 after SIGINT / SIGTERM (status "interrupted")
     compat = sys.modules.get("app.compat")  # not imported: no HDF5 file was written
-    if argv is None and compat is not None and compat.has_abandoned():
-        compat.end_process(code)
     if argv is None:
-        code = interrupt.leave(code)  # a multi-rank job: every rank done before one ends non-zero
+        code = interrupt.leave(code)  # a multi-rank job: the ranks agree on the code, rank 0 ends with it
+        if compat is not None and compat.has_abandoned():
+            compat.end_process(code)
     return code
 
 

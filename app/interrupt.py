@@ -86,33 +86,46 @@ def exit_code() -> int | None:
     return EXIT_CODES.get(agreed) if agreed else None
 
 
-# How long rank 0 waits, after the other ranks were released, before it ends with a non-zero code.
+# How long rank 0 waits, once the ranks agreed on a non-zero code, before it ends with it; and how long a
+# rank waits for the others to reach the end before it ends as it would have without them.
 LEAVE_DELAY = 0.5
+LEAVE_TIMEOUT = 60.0
 
 
 def leave(code: int) -> int:
-    """The exit code this process should end with, after the ranks of a multi-rank job agreed to end.
+    """The exit code this process ends with, in a job of several ranks: every command's last step.
 
     Open MPI 5's launcher (Debian 13) tears the job down as soon as one process exits with a non-zero
-    code: a rank still writing summary.json or its one-line error was killed (measured: no summary.json
-    after SIGTERM, and ``PMIX ERROR: PMIX_ERR_UNREACH`` lines from a rank killed inside MPI_Finalize, in
-    most runs of a loaded 2-core machine). So on a non-zero code every rank first waits for the others
-    (a barrier: everything is written), the other ranks end with 0, and rank 0 ends with the code a
-    moment later, when they are gone. mpirun and srun report the code (the first / the largest non-zero).
-    Serial runs and code 0 are unchanged."""
+    code, killing ranks that are still writing (measured under load: a bad config on 2 ranks printed
+    ``PMIX ERROR: PMIX_ERR_UNREACH`` from a rank killed inside MPI_Finalize in 5 of 6 runs). So the ranks
+    first agree on the job's code (the largest of their codes, by a non-blocking allreduce: nobody ends
+    before everybody has finished writing); if it is non-zero the other ranks end 0 and rank 0 ends with
+    it LEAVE_DELAY later, so theirs are not the first non-zero exit. ``mpirun`` reports the first non-zero
+    code, ``srun`` the largest. A rank that does not hear from all others within LEAVE_TIMEOUT (another
+    rank died, or is stuck in a collective this one left) ends with its own code, as without this step.
+    Serial runs are unchanged."""
     mpi = sys.modules.get("mpi4py.MPI")
-    if code == 0 or mpi is None or not mpi.Is_initialized() or mpi.Is_finalized():
+    if mpi is None or not mpi.Is_initialized() or mpi.Is_finalized():
         return code
     comm = mpi.COMM_WORLD
     if comm.size == 1:
         return code
-    comm.barrier()
-    if comm.rank != 0:
-        return 0
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
         except (OSError, ValueError):
             pass
+    import numpy as np
+
+    mine, job = np.array([code], dtype=np.int64), np.zeros(1, dtype=np.int64)
+    request = comm.Iallreduce(mine, job, op=mpi.MAX)
+    deadline = time.monotonic() + LEAVE_TIMEOUT
+    while not request.Test():
+        if time.monotonic() > deadline:
+            return code
+        time.sleep(0.005)
+    worst = int(job[0])
+    if worst == 0 or comm.rank != 0:
+        return 0
     time.sleep(LEAVE_DELAY)
-    return code
+    return worst

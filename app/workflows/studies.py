@@ -197,9 +197,12 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
             if sub.rank == 0:
                 log.info(f"study: {case.label}: done in {time.perf_counter() - t0:.1f} s")
     finally:
-        watch.__exit__()
-        errors = comm.allgather(write_error)  # also the barrier that keeps the groups in step
-        sub.Free()
+        try:  # still watching: a rank whose group is done (or an idle rank) is stopped by a signal, not killed
+            errors = comm.allgather(write_error)  # also the barrier that keeps the groups in step
+            interrupt.pending(comm)  # a signal any group saw is the whole study's (its exit code)
+        finally:
+            watch.__exit__()
+            sub.Free()
     first = next((e for e in errors if e), None)
     if first is not None:
         raise ResultWriteError(*first)
