@@ -121,7 +121,7 @@ def test_sigterm_to_the_ranks_stops_both_collectively_and_mpirun_reports_143(sha
     """A scheduler's SIGTERM to both ranks of `mpirun -n 2 hydrobuckle run` (mpirun itself untouched, so
     nothing kills the ranks while they finish): they agree (allreduce) to stop after the same step,
     rank 0 writes summary.json ("interrupted"), and the job's code is 143 on Open MPI 4 and 5 alike
-    (rank 0 ends with it once the other rank has left: app.interrupt.leave)."""
+    (the ranks agree on the code and rank 0 alone ends with it: app.interrupt.leave)."""
     cfg = shared_tmp / "long.toml"
     out = shared_tmp / "ranks"
     on_rank0(cfg.write_text, LONG)
