@@ -90,6 +90,7 @@ def exit_code() -> int | None:
 # rank waits for the others to reach the end before it ends as it would have without them.
 LEAVE_DELAY = 0.5
 LEAVE_TIMEOUT = 60.0
+job_code = None  # the code the ranks agreed on in leave() (None: not agreed)
 
 
 def leave(code: int) -> int:
@@ -124,7 +125,8 @@ def leave(code: int) -> int:
         if time.monotonic() > deadline:
             return code
         time.sleep(0.005)
-    worst = int(job[0])
+    global job_code
+    worst = job_code = int(job[0])
     if worst == 0 or comm.rank != 0:
         return 0
     time.sleep(LEAVE_DELAY)
