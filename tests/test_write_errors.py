@@ -179,7 +179,11 @@ def test_a_disk_filled_by_the_fields_stops_the_run_with_one_line(ranks, long_run
     out = tmpfs("400k") / "out"
     first, table, summary, step, times, resumed = on_rank0(_fields_fill_the_disk, toml, out, ranks)
     line = f"hydrobuckle: error: cannot write {out / 'fields.h5'}: {NO_SPACE}"
-    assert first.returncode == 2 and ours(first.stderr) == [line], first.stderr[-3000:]
+    # The run ends without MPI_Finalize (HDF5 holds the unwritable file and its close in MPI_Finalize
+    # hung: compat.end_process); when rank 0 has ended, Open MPI 5's launcher ends the other rank and
+    # sometimes says so with a PMIx line of its own (measured: 1 of 5 runs on Debian 13).
+    said = [ln for ln in ours(first.stderr) if "PMIX ERROR: PMIX_ERR_UNREACH" not in ln]
+    assert first.returncode == 2 and said == [line], first.stderr[-3000:]
     assert 5 < len(table) < 100  # it stopped mid-run (the whole run has about 580 steps)
     assert times == [float(r["time"]) for r in table[:-1]]
     assert summary["status"] == "failed" and summary["message"] == line.removeprefix("hydrobuckle: error: ")
@@ -266,14 +270,14 @@ def test_a_failure_inside_hdf5_is_agreed_on_without_a_hang(ranks, shared_tmp, tm
     fails (on 2 ranks: on one rank only). Every rank agrees after that dataset, the file is never
     closed (its close would hang or abort), HDF5's own error stack is not printed, and the process ends
     with one line naming fields.h5 and exit 2 in seconds. Open MPI's MPI-IO may add its own line about
-    the failed write on 2 ranks (it prints it itself)."""
+    the failed write on 2 ranks (it prints it itself; conftest.ours leaves it out)."""
     from cases import SWELLING
 
     cfg = config.resolve(SWELLING, ["output.fields=true", "stability.error_estimate=false"])
     toml = write_on_rank0(shared_tmp / "strip.toml", config.dumps(cfg))
     out = tmpfs("200k") / "out"
     done, seconds, table = on_rank0(_hdf5_meets_the_full_disk, toml, out, ranks)
-    said = [ln for ln in ours(done.stderr) if not ln.startswith("mca_fbtl_posix")]
+    said = [ln for ln in ours(done.stderr) if "PMIX ERROR: PMIX_ERR_UNREACH" not in ln]  # as above
     assert done.returncode == 2, done.stderr[-3000:]
     assert said == [f"hydrobuckle: error: cannot write {out / 'fields.h5'}: {NO_SPACE}"], done.stderr[-3000:]
     assert seconds < 60 and len(table) >= 1
