@@ -609,10 +609,9 @@ def main(argv: list[str] | None = None) -> int:
     code = interrupt.exit_code() or code  # 130 / 143 after SIGINT / SIGTERM (status "interrupted")
     compat = sys.modules.get("app.compat")  # not imported: no HDF5 file was written
     if argv is None:
-        own_code = code
         code = interrupt.leave(code)  # a multi-rank job: the ranks agree on the code, rank 0 ends with it
         if compat is not None and compat.has_abandoned():
-            compat.end_process(interrupt.job_code if interrupt.job_code is not None else own_code)
+            compat.end_process(interrupt.job_code)
     return code
 
 

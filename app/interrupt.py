@@ -90,7 +90,7 @@ def exit_code() -> int | None:
 # rank waits for the others to reach the end before it ends as it would have without them.
 LEAVE_DELAY = 0.5
 LEAVE_TIMEOUT = 60.0
-job_code = None  # the code the ranks agreed on in leave() (None: not agreed)
+job_code = None  # the job's code from leave(): the agreed one, else (serial, no agreement) this process's
 
 
 def leave(code: int) -> int:
@@ -105,6 +105,8 @@ def leave(code: int) -> int:
     code, ``srun`` the largest. A rank that does not hear from all others within LEAVE_TIMEOUT (another
     rank died, or is stuck in a collective this one left) ends with its own code, as without this step.
     Serial runs are unchanged."""
+    global job_code
+    job_code = code
     mpi = sys.modules.get("mpi4py.MPI")
     if mpi is None or not mpi.Is_initialized() or mpi.Is_finalized():
         return code
@@ -125,7 +127,6 @@ def leave(code: int) -> int:
         if time.monotonic() > deadline:
             return code
         time.sleep(0.005)
-    global job_code
     worst = job_code = int(job[0])
     if worst == 0 or comm.rank != 0:
         return 0
