@@ -44,7 +44,7 @@ def _space(domain, element):
     return fem.functionspace(domain, element) if MODERN else fem.FunctionSpace(domain, element)
 
 
-def _cells_by_row(adjacency, n: int) -> np.ndarray:
+def cells_by_row(adjacency, n: int) -> np.ndarray:
     """A dofmap (an adjacency list in 0.5, an array in 0.9) as an (n, entries per cell) int64 array."""
     data = adjacency.array if hasattr(adjacency, "array") else adjacency
     return np.asarray(data, dtype=np.int64).reshape(n, -1)
@@ -182,7 +182,7 @@ def vertex_to_geometry(domain) -> np.ndarray:
 
 def cell_geometry_nodes(domain) -> np.ndarray:
     """Geometry node indices per cell (owned + ghost), shape (num_cells, nodes_per_cell)."""
-    return _cells_by_row(domain.geometry.dofmap, num_local_cells(domain))
+    return cells_by_row(domain.geometry.dofmap, num_local_cells(domain))
 
 
 def num_local_cells(domain) -> int:
@@ -200,74 +200,6 @@ def original_node_indices(domain) -> np.ndarray:
 def node_coordinates(domain) -> np.ndarray:
     """Coordinates (x, y) of the local geometry nodes."""
     return domain.geometry.x[:, :2]
-
-
-def lagrange1_dof_nodes(V) -> np.ndarray:
-    """The geometry node of each local dof (block) of a first-order Lagrange space V on a first-order mesh.
-
-    Both dofmaps list a cell's entries in the reference cell's vertex order, so the k-th dof of a cell
-    sits on the cell's k-th geometry node; checked here against the dof coordinates."""
-    domain = V.mesh
-    n = num_local_cells(domain)
-    dofs = _cells_by_row(V.dofmap.list, n)
-    nodes = cell_geometry_nodes(domain)
-    if dofs.shape != nodes.shape:
-        raise RuntimeError(f"{dofs.shape[1]} dofs per cell but {nodes.shape[1]} geometry nodes: not P1 on a P1 mesh")
-    size = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
-    out = np.full(size, -1, dtype=np.int64)
-    out[dofs.ravel()] = nodes.ravel()
-    X = V.tabulate_dof_coordinates()[:, :2]
-    if (out < 0).any() or not np.allclose(X, node_coordinates(domain)[out], rtol=0.0,
-                                          atol=1e-12 * max(1.0, float(np.abs(X).max(initial=0.0)))):
-        raise RuntimeError("P1 dofs and geometry nodes do not coincide")
-    return out
-
-
-def facet_of_dofs(V) -> np.ndarray:
-    """The facet of each local dof of a lowest-order facet space (RTCF1: one dof per facet), from the
-    cells' dofmaps and their facets in reference order."""
-    domain = V.mesh
-    tdim = domain.topology.dim
-    domain.topology.create_connectivity(tdim, tdim - 1)
-    n = num_local_cells(domain)
-    c2f = np.asarray(domain.topology.connectivity(tdim, tdim - 1).array, dtype=np.int64).reshape(n, -1)
-    dofs = _cells_by_row(V.dofmap.list, n)
-    size = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
-    out = np.full(size, -1, dtype=np.int64)
-    layout = V.dofmap.dof_layout
-    for i in range(c2f.shape[1]):
-        local = list(layout.entity_dofs(tdim - 1, i))
-        if len(local) != 1:
-            raise RuntimeError(f"{len(local)} dofs on facet {i} of the reference cell: not a lowest-order facet space")
-        out[dofs[:, local[0]]] = c2f[:, i]
-    if (out < 0).any():
-        raise RuntimeError("a facet-space dof on no local cell")
-    return out
-
-
-def facet_dof_normals(V) -> np.ndarray:
-    """(n_x, n_y) per local dof of a lowest-order Raviart-Thomas space: the dofs of the constant fields
-    e_x and e_y, i.e. the (length-scaled) normal each dof measures the flux along. Its sign follows the
-    facet's orientation, which dolfinx takes from the partition's global vertex numbering."""
-    f = fem.Function(V)
-    out = []
-    for comp in range(2):
-        f.interpolate(lambda x, c=comp: np.vstack([np.full(x.shape[1], float(c == k)) for k in range(2)]))
-        f.x.scatter_forward()
-        out.append(f.x.array.copy())
-    return np.column_stack(out)
-
-
-def facet_nodes(domain) -> np.ndarray:
-    """The two geometry nodes (vertices) of each local facet of a 2D mesh, shape (num_facets, 2)."""
-    tdim = domain.topology.dim
-    domain.topology.create_connectivity(tdim - 1, 0)
-    domain.topology.create_connectivity(tdim, 0)
-    f2v = np.asarray(domain.topology.connectivity(tdim - 1, 0).array, dtype=np.int64).reshape(-1, 2)
-    c2v = np.asarray(domain.topology.connectivity(tdim, 0).array, dtype=np.int64).reshape(num_local_cells(domain), -1)
-    v2g = np.full(domain.topology.index_map(0).size_local + domain.topology.index_map(0).num_ghosts, -1, np.int64)
-    v2g[c2v] = cell_geometry_nodes(domain)[:, : c2v.shape[1]]  # a first-order cell's nodes are its vertices
-    return v2g[f2v]
 
 
 def exterior_facets(domain) -> np.ndarray:
@@ -368,13 +300,6 @@ def assemble_residual_into(b, L, a, bcs, x, lifting: bool = True):
     fem_petsc.set_bc(b, bcs, x, -1.0)
 
 
-def assemble_matrix(a, bcs=()):
-    """A new assembled matrix of the bilinear form ``a``."""
-    A = fem_petsc.assemble_matrix(a, bcs=list(bcs))
-    A.assemble()
-    return A
-
-
 def assemble_vector(L) -> PETSc.Vec:
     b = fem_petsc.assemble_vector(L)
     b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
@@ -433,131 +358,3 @@ def xdmf_function_bytes(f: fem.Function) -> int:
     im = f.function_space.dofmap.index_map
     bs = f.function_space.dofmap.index_map_bs
     return 8 * im.size_global * (3 if bs == 2 else bs)
-
-
-# --- HDF5's errors (dolfinx raises a RuntimeError that names neither the file nor the OS error) --------
-
-_hdf5 = {"lib": None, "looked": False, "callbacks": None}
-_abandoned: list = []  # HDF5 files that failed inside HDF5: never closed (see abandon)
-
-
-def _hdf5_library():
-    """The libhdf5 dolfinx loaded (ctypes), or None (then errors are left as HDF5 prints them)."""
-    import ctypes
-    import os
-    import re
-
-    if not _hdf5["looked"]:
-        _hdf5["looked"] = True
-        try:
-            with open("/proc/self/maps") as f:
-                paths = {line.split()[-1] for line in f if "libhdf5" in line}
-            path = next(p for p in sorted(paths) if re.match(r"libhdf5(_[a-z]+)?\.so", os.path.basename(p))
-                        and "_hl" not in os.path.basename(p))
-            lib = ctypes.CDLL(path)
-            hid_t = ctypes.c_int64  # HDF5 >= 1.10
-
-            class Error(ctypes.Structure):  # H5E_error2_t
-                _fields_ = [("cls_id", hid_t), ("maj_num", hid_t), ("min_num", hid_t), ("line", ctypes.c_uint),
-                            ("func_name", ctypes.c_char_p), ("file_name", ctypes.c_char_p),
-                            ("desc", ctypes.c_char_p)]
-
-            walk_t = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_uint, ctypes.POINTER(Error), ctypes.c_void_p)
-            auto_t = ctypes.CFUNCTYPE(ctypes.c_int, hid_t, ctypes.c_void_p)
-            lib.H5Ewalk2.argtypes = [hid_t, ctypes.c_int, walk_t, ctypes.c_void_p]
-            lib.H5Eset_auto2.argtypes = [hid_t, auto_t, ctypes.c_void_p]
-            lib.H5Eget_auto2.argtypes = [hid_t, ctypes.POINTER(auto_t), ctypes.POINTER(ctypes.c_void_p)]
-            _hdf5.update(lib=lib, auto_t=auto_t, walk_t=walk_t, hid_t=hid_t)
-        except (OSError, StopIteration, AttributeError):
-            _hdf5["lib"] = None
-    return _hdf5["lib"]
-
-
-class HDF5Errors:
-    """While entered, HDF5's automatic error report (the 'HDF5-DIAG' stack on stderr) is replaced by
-    recording the stack's descriptions; :meth:`reason` then gives the OS's words where HDF5 recorded an
-    errno (its serial driver does: "errno = 28, error message = 'No space left on device'"; its MPI-IO
-    driver does not)."""
-
-    def __init__(self):
-        self.messages: list[str] = []
-        self._saved = None
-
-    def __enter__(self) -> HDF5Errors:
-        import ctypes
-
-        lib = _hdf5_library()
-        if lib is None:
-            return self
-        messages = self.messages
-
-        def walk(n, err, data):
-            desc = err.contents.desc
-            messages.append(desc.decode(errors="replace") if desc else "")
-            return 0
-
-        def auto(stack, data):
-            lib.H5Ewalk2(stack, 0, walk_c, None)  # H5E_WALK_UPWARD: from where the error was detected
-            return 0
-
-        walk_c, auto_c = _hdf5["walk_t"](walk), _hdf5["auto_t"](auto)
-        old_f, old_d = _hdf5["auto_t"](), ctypes.c_void_p()
-        if lib.H5Eget_auto2(0, ctypes.byref(old_f), ctypes.byref(old_d)) >= 0:  # 0: H5E_DEFAULT
-            self._saved = (old_f, old_d, walk_c, auto_c)
-            lib.H5Eset_auto2(0, auto_c, None)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self._saved is not None:
-            _hdf5_library().H5Eset_auto2(0, self._saved[0], self._saved[1])
-            self._saved = None
-
-    def os_reason(self) -> str | None:
-        """The OS error HDF5 recorded (strerror of its errno), or None."""
-        import os
-        import re
-
-        for text in self.messages:
-            m = re.search(r"errno = (\d+)", text)
-            if m:
-                return os.strerror(int(m.group(1)))
-        return None
-
-    def reason(self, err: BaseException) -> str:
-        """One line for a failed HDF5 call: the OS error if recorded, else dolfinx's and HDF5's words."""
-        detail = next((m for m in self.messages if m), "")
-        return self.os_reason() or (f"{err} ({detail})" if detail else str(err)).replace("\n", " ")[:300]
-
-
-def abandon(xdmf_file) -> None:
-    """Keep an XDMFFile that failed inside HDF5 alive and never close it: its close (also the one its
-    destructor makes) would wait in a collective for a rank that left, or throw from the destructor
-    (measured: std::terminate at exit). The CLI ends such a process with :func:`end_process`."""
-    _abandoned.append(xdmf_file)
-
-
-def has_abandoned() -> bool:
-    return bool(_abandoned)
-
-
-def end_process(code: int) -> None:
-    """End a process that holds abandoned HDF5 files with the job's (non-zero) ``code``, agreed by the ranks
-    (app.interrupt.leave): output flushed, then exit at once. Neither destructors nor MPI_Finalize run:
-    HDF5 closes its open files when MPI is finalized, and that close hung (measured: 1 of 3 attempts on
-    2 ranks). Rank 0 ends first and the launcher then ends the others: Open MPI 5 reports a rank that
-    ends 0 without MPI_Finalize as an improper exit (code 1), and two ranks ending non-zero at once made
-    it print a PMIx error; the other ranks end by themselves only if nothing ends them within 10 s."""
-    import os
-    import sys
-    import time
-
-    from mpi4py import MPI
-
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
-    if MPI.Is_initialized() and not MPI.Is_finalized() and MPI.COMM_WORLD.rank != 0:
-        time.sleep(10.0)
-    os._exit(code)

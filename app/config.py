@@ -75,10 +75,6 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
                              "sqrt(area/cells)); sign = direction, not 0"),
         "modes": _key(int, 3, _in_closed(1, 50), "eigenpairs reported at the onset"),
         "eigen_every": _key(int, 0, _ge(0), "also compute lambda_min every n steps (0 = only at the onset)"),
-        "criterion": _key(str, "drained", _one_of("drained", "undrained", "rate"),
-                          "which perturbations count: drained (fluid may redistribute; any growing mode), "
-                          "undrained (fluid frozen) or rate (K with stability.tau)"),
-        "tau": _key(float, 1.0e-2, _gt(0), "criterion = rate only: step of the dissipation block of K [s]"),
         "surface_check": _key(bool, True, None,
                               "check the permeable surface's short-wave limit every step from the local state: "
                               "reports where and when it becomes unstable at waves below the mesh "
@@ -89,25 +85,7 @@ _STATIC: dict[str, dict[str, Key] | dict] = {
         "error_estimate": _key(bool, True, None,
                                "estimate g_c's discretization error with two coarsened companion runs"),
     },
-    "reduced": {
-        "beside_2d": _key(bool, True, None, "a bilayer or circular-tube run also reports its exact 1D counterpart "
-                          "(summary.json 'reduced', docs/reduction.md)"),
-        "degree": _key(int, 3, _in_closed(1, 6), "Lagrange degree of the 1D fields"),
-        "film_cells": _key(int, 12, _in_closed(1, 512), "1D cells through the film"),
-        "grading": _key(float, 1.25, _in_closed(1.0, 3.0), "1D cell-size ratio away from the film"),
-        "surface_grading": _key(float, 1.35, _in_closed(1.0, 3.0),
-                                "1D cell-size ratio through the film away from the permeable surface (its "
-                                "diffusion boundary layer)"),
-        "step_change": _key(float, 0.01, _in_open(0.0, 0.5),
-                            "largest relative change of the displacement per time step of the 1D transient"),
-        "max_wavenumber": _key(float, 20.0, _in_closed(1.0, 1000.0),
-                               "largest k w screened mode by mode (k along the surface, w the film thickness); "
-                               "shorter waves: the surface's short-wave limit"),
-        "grid": _key(int, 48, _in_closed(8, 2000), "mode numbers screened every step (logarithmically spaced)"),
-        "horizon": _key(float, 0.5, _in_closed(0.0, 20.0),
-                        "continue this fraction of the first crossing time past it (the margin curve's later "
-                        "crossings)"),
-    },
+    "reduced": {},  # declared by the 1D reduction: app/reduced/keys.py
     "output": {
         "fields": _key(bool, True, None, "write fields.xdmf"),
         "every": _key(int, 1, _ge(1), "write fields every n accepted steps"),
@@ -122,7 +100,34 @@ def schema() -> dict:
     """The whole schema: the static tables above, with the geometry, material and loading tables built
     from the registered geometry kinds, material laws and loadings (so one registered later, e.g. by a
     test, is part of it at once)."""
-    return {**_STATIC, "geometry": _geometry_table(), "material": _material_table(), "loading": _loading_table()}
+    from app.reduced.keys import KEYS as reduced_keys
+
+    return {**_STATIC, "stability": _stability_table(), "reduced": dict(reduced_keys), "geometry": _geometry_table(),
+            "material": _material_table(), "loading": _loading_table()}
+
+
+def _stability_table() -> dict:
+    """The static [stability] keys with ``criterion`` (one of the registered criteria) and every criterion's
+    parameters after ``eigen_every``."""
+    from app.onset import criteria
+
+    crits = criteria.CRITERIA
+    table: dict[str, Key] = {}
+    for name, spec in _STATIC["stability"].items():
+        table[name] = spec
+        if name != "eigen_every":
+            continue
+        table["criterion"] = _key(str, criteria.DEFAULT, _one_of(*crits.names()),
+                                  "which perturbations count: " + ", ".join(c.doc for c in crits))
+        for crit in crits:
+            for key_name, key_spec in crit.keys.items():
+                if key_name in _STATIC["stability"] or key_name == "criterion":
+                    raise ValueError(f"stability criterion {crit.name!r} declares stability.{key_name}, a key "
+                                     "of the [stability] table")
+                if key_name in table and table[key_name].type is not key_spec.type:
+                    raise ValueError(f"stability.{key_name}: criteria declare it with different types")
+                table.setdefault(key_name, key_spec)
+    return table
 
 
 def _kinds():
@@ -245,16 +250,20 @@ def _defaults(schema: dict) -> dict:
     return out
 
 
-def load(path: str | Path, overrides: list[str] | None = None) -> dict:
-    """Read, merge with defaults, apply ``--set`` overrides and validate a config file."""
+def read(path: str | Path) -> dict:
+    """A config file's own tables, as written (not merged, not validated)."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError("", f"config file '{path}' does not exist")
     try:
-        user = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise ConfigError("", f"config file '{path}' is not valid TOML: {err}") from None
-    return resolve(user, overrides)
+
+
+def load(path: str | Path, overrides: list[str] | None = None) -> dict:
+    """Read, merge with defaults, apply ``--set`` overrides and validate a config file."""
+    return resolve(read(path), overrides)
 
 
 def resolve(user: dict, overrides: list[str] | None = None) -> dict:
@@ -287,6 +296,15 @@ def _check_unused_geometry_keys(cfg: dict, kind) -> None:
         if name != "kind" and name not in kind.keys and cfg["geometry"].get(name) is not None:
             raise ConfigError(f"geometry.{name}", f"is not used by geometry.kind = {kind.name!r}; its keys are: "
                               + ", ".join(sorted(kind.keys)))
+
+
+def parse_values(text: str, key: str = "--values") -> list:
+    """Comma-separated values, each read as a TOML value (else a string); a ConfigError naming ``key`` when
+    there is none."""
+    out = [parse_override(f"v={item.strip()}")[1] for item in text.split(",") if item.strip()]
+    if not out:
+        raise ConfigError(key, "needs at least one value, e.g. --values 0.01,0.02")
+    return out
 
 
 def parse_override(item: str) -> tuple[str, Any]:

@@ -8,6 +8,11 @@ parts="${HYDROBUCKLE_TEST_PARTS:-serial mpi}"
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 bash scripts/install.sh
+if ! "$here/.venv/bin/lint-imports" --version >/dev/null 2>&1; then
+  echo "test: installing scripts/test-requirements.txt into .venv"
+  "$here/.venv/bin/python" -m pip install --quiet -r scripts/test-requirements.txt \
+    || { echo "test: error: cannot install scripts/test-requirements.txt (PyPI unreachable?)" >&2; exit 1; }
+fi
 source scripts/mpi-env.sh
 
 if [[ " $parts " == *" serial "* ]]; then

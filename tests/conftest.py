@@ -22,6 +22,15 @@ from mpi4py import MPI
 from app import config, logging_setup
 
 
+# Tests that the 2-rank session leaves to the serial one, because there they would only repeat it:
+#: its computation has no communicator (the 1D reduction, config validation): every rank would compute the same
+rank_local = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="rank-local computation: every rank would repeat "
+                                "it; the serial session runs it")
+#: it starts its own runs as child processes from rank 0 (serially and under mpirun -n 2) and checks them there
+child_jobs = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="starts its own runs as child processes (1 and 2 "
+                                "ranks): the serial session starts the same ones")
+
+
 @pytest.fixture(autouse=True)
 def _collective_cleanup():
     """Keep collective destructors of PETSc/dolfinx objects in step across ranks."""
@@ -62,18 +71,19 @@ def small_bilayer(**overrides) -> dict:
 
 def time_stepper(problem, cfg: dict):
     """A TimeStepper with the [time] and [solver] settings of a resolved config."""
+    from app.onset.contact import ModelLimits
     from app.solvers.stepping import TimeStepper
     from app.workflows.run import RunSettings
 
     settings = RunSettings.from_config(cfg)
-    return TimeStepper(problem, settings.time, settings.solver)
+    return TimeStepper(problem, settings.time, settings.solver, limits=ModelLimits)
 
 
 def run_to_end(cfg: dict, comm):
     """Integrate a config to time.end without the stability test: (problem, stepper, records)."""
-    from app.model.problem import Problem
+    from app import factory
 
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     st = time_stepper(p, cfg)
     rows = [st.initial_record()]
     while not st.done():

@@ -13,6 +13,7 @@ import math
 import re
 
 import pytest
+from conftest import rank_local
 from mpi4py import MPI
 
 from app import cli, config
@@ -134,6 +135,7 @@ def test_the_sweep_covers_every_key():
     assert len(BAD) >= 200 and len(GOOD) >= 30, (len(BAD), len(GOOD))
 
 
+@rank_local
 @pytest.mark.parametrize("label,dotted,user", BAD, ids=[c[0] for c in BAD])
 def test_bad_value_is_rejected_naming_the_key(label, dotted, user):
     with pytest.raises(config.ConfigError) as err:
@@ -143,6 +145,7 @@ def test_bad_value_is_rejected_naming_the_key(label, dotted, user):
     assert "\n" not in msg and f"'{dotted}'" in msg
 
 
+@rank_local
 @pytest.mark.parametrize("label,dotted,user", GOOD, ids=[c[0] for c in GOOD])
 def test_closed_end_of_the_range_is_accepted(label, dotted, user):
     cfg = config.resolve(user)

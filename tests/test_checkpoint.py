@@ -28,6 +28,7 @@ import pytest
 import ufl
 from cases import LONG, TINY_BILAYER_TOML, swelling_case
 from conftest import (
+    child_jobs,
     EXE,
     MPIRUN,
     finish,
@@ -50,7 +51,7 @@ from mpi4py import MPI
 from app import compat, config
 from app.cli import main
 from app.io import checkpoint
-from app.model.problem import Problem
+from app import factory
 from app.onset.tracker import Untracked
 from app.workflows.run import simulate
 
@@ -113,7 +114,7 @@ LAYOUT_CASE = ("geometry.length=0.15", "mesh.element_size=0.01")
 
 def _save_known(path, comm) -> None:
     cfg = swelling_case(*LAYOUT_CASE)
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     st = time_stepper(p, cfg)
     k = _known(p)
     p.state.x.array[:] = k["state"]
@@ -144,7 +145,7 @@ def _flux_mismatch(p, a: np.ndarray, b: np.ndarray) -> float:
 def _load_and_compare(path, comm) -> None:
     cfg = swelling_case(*LAYOUT_CASE)
     resume = checkpoint.check(path, cfg, comm)
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     st = time_stepper(p, cfg)
     checkpoint.restore(resume, p, st, Untracked())
     k = _known(p)  # the same fields interpolated on this layout
@@ -436,6 +437,7 @@ def _kill_and_resume(toml, out):
     return code, len(killed), step, resumed
 
 
+@child_jobs
 def test_sigkill_loses_at_most_the_steps_since_the_last_checkpoint(long_case, shared_tmp):
     """SIGKILL to a serial `hydrobuckle run` once a checkpoint exists: history.csv is valid CSV, the last
     checkpoint is at most output.checkpoint_every steps behind it; `run --resume` then gives the
@@ -470,6 +472,7 @@ def _kill_mpirun_and_resume(toml, out, reference):
     return code, len(killed), left, rows, summary, meta, resumed
 
 
+@child_jobs
 def test_sigkill_of_an_mpirun_job_loses_at_most_the_steps_since_the_last_checkpoint(long_case, shared_tmp):
     """SIGKILL to every process of a running `mpirun -n 2 hydrobuckle run` (mpirun and its two ranks, as
     a node failure or `kill -9` of the job) once a checkpoint exists: history.csv is valid CSV, the
@@ -504,6 +507,7 @@ def _term_and_resume(toml, out):
     return code, summary, meta["step"], len(meta["rows"]), resumed
 
 
+@child_jobs
 def test_sigterm_writes_a_checkpoint_to_resume_from(long_case, shared_tmp):
     """SIGTERM: exit 143, status "interrupted", and a checkpoint of the very step the run stopped at
     (not only the last periodic one); --resume continues to the uninterrupted run's result."""
@@ -528,6 +532,7 @@ def _interrupt_sweep(toml, out):
     return code, first_out, listing, again
 
 
+@child_jobs
 def test_interrupted_sweep_stops_after_the_current_case_and_resumes_it(long_case, shared_tmp):
     """SIGINT during the first case of a sweep: it stops after that case (exit 130; before, each later
     case still built its mesh and wrote an "interrupted" directory), which keeps a checkpoint; the rerun

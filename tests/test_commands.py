@@ -656,9 +656,9 @@ def test_user_msh_with_a_third_material(shared_tmp, comm):
 
     cfg = config.resolve(_msh_user(shared_tmp, {"modulus_ratio": 3.0, "mobility": 2e-4}),
                          ["stability.enabled=false", "time.end=0.05"])
-    from app.model.problem import Problem
+    from app import factory
 
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     for group, value in (("film", 0.8), ("coating", 0.3), ("substrate", 0.1)):
         assert p.mat.shear_modulus.x.array[p.tm.cells(group)] == pytest.approx(value, rel=1e-15)
     assert np.all(p.mat.mobility.x.array[p.tm.cells("coating")] == 2e-4)

@@ -8,7 +8,7 @@ from conftest import small_bilayer
 from petsc4py import PETSc
 
 from app import compat
-from app.model.problem import Problem
+from app import factory
 
 
 def distorted_mesh(comm, n=6):
@@ -107,7 +107,7 @@ def _hessian(problem):
 
 
 def test_hessian_is_symmetric_at_a_general_state(comm):
-    p = Problem.from_config(small_bilayer(), comm)
+    p = factory.problem(small_bilayer(), comm)
     rng = np.random.default_rng(3 + comm.rank)
     p.state.x.array[p.u_dofs] = 1e-3 * rng.standard_normal(len(p.u_dofs))
     p.state.x.array[p.q_dofs] = 1e-5 * rng.standard_normal(len(p.q_dofs))
@@ -150,7 +150,7 @@ def test_residual_vanishes_in_the_reference_state(comm, ratio):
     interface (the initial chemical mismatch between layers; README, "Each layer has its own
     reference state")."""
     cfg = small_bilayer(**{"material.film.modulus_ratio": ratio})
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     p.set_time(0.0, 0.01)
     nu, nq = _block_norms(p, _residual(p))
     scale = p.materials["substrate"].shear_modulus * cfg["geometry"]["film_thickness"]
@@ -168,7 +168,7 @@ def test_residual_vanishes_in_the_reference_state(comm, ratio):
 def test_residual_lifting_vanishes_once_the_iterate_meets_the_dirichlet_values(comm):
     """The Newton solver skips the lifting term K (g - x) when x meets the Dirichlet values: the
     residual is then the same with and without it; where x misses them the term matters."""
-    p = Problem.from_config(small_bilayer(), comm)
+    p = factory.problem(small_bilayer(), comm)
     rng = np.random.default_rng(5 + comm.rank)
     p.w.x.array[p.u_dofs] = 1e-4 * rng.standard_normal(len(p.u_dofs))
     p.w.x.array[p.q_dofs] = 1e-7 * rng.standard_normal(len(p.q_dofs))

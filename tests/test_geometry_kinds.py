@@ -102,7 +102,7 @@ def test_unregistered_kind_leaves_the_schema(toy):
 
 def test_a_registered_kind_is_written_by_the_mesh_command_and_builds_a_problem(toy, shared_tmp, capsys):
     from app.geometry import msh as user_msh
-    from app.model.problem import Problem
+    from app import factory
 
     comm = MPI.COMM_WORLD
     cfg_path, out = shared_tmp / "toy.toml", shared_tmp / "toy.msh"
@@ -115,7 +115,7 @@ def test_a_registered_kind_is_written_by_the_mesh_command_and_builds_a_problem(t
         assert f"wrote {out}" in printed and "'toy': True" in printed
     cells, facets = user_msh.physical_groups(comm, out)
     assert sorted(cells) == ["film", "substrate"] and sorted(facets) == ["bottom", "left", "right", "top"]
-    p = Problem.from_config(config.load(cfg_path), comm)
+    p = factory.problem(config.load(cfg_path), comm)
     assert p.tm.info["toy"] is True and p.loading.kind == "swelling"
     assert p.loading.mu_bar(0.0) == p.materials["film"].mu0
 

@@ -11,7 +11,7 @@ from conftest import REPO
 
 from app import cli, config, geometry
 from app.geometry.base import MAX_CELLS
-from app.model.problem import Problem
+from app import factory
 
 SMALL = {
     "bilayer": {"geometry": {"length": 0.3, "substrate_thickness": 0.15, "film_thickness": 0.01},
@@ -28,7 +28,7 @@ ABSURD = ["--set", "mesh.element_size=1e-6"]  # L = 2 mm: 2,000,000 elements alo
 def test_estimate_matches_the_built_mesh(name, comm):
     cfg = config.resolve(SMALL[name], [])
     est = geometry.kind_of(cfg).estimate(cfg)
-    problem = Problem.from_config(cfg, comm)
+    problem = factory.problem(cfg, comm)
     # the counting follows the builders exactly; the brief allows a few %
     assert est["cells"] == pytest.approx(problem.cells(), rel=0.02)
     assert est["dofs"] == pytest.approx(problem.dofs(), rel=0.02)

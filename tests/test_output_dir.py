@@ -10,6 +10,7 @@ import pytest
 from conftest import REPO
 
 from app import cli
+from app.workflows import preflight
 
 CONFIG = str(REPO / "configs" / "bilayer.toml")
 
@@ -98,7 +99,7 @@ def test_read_only_file_system_is_bad_input(command, tmpfs, comm, capsys):
 def test_writable_output_dir_passes_the_check(shared_tmp, comm):
     """A fresh path and an existing directory pass, and the check creates nothing."""
     for path in (shared_tmp / "new" / "deeper", shared_tmp):
-        cli._check_output(path, comm)
+        preflight.check_output(path, comm)
     comm.barrier()
     assert not (shared_tmp / "new").exists()
     assert not [p for p in os.listdir(shared_tmp) if p.startswith(".hydrobuckle-probe-")]

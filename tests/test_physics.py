@@ -30,10 +30,10 @@ def test_fluid_taken_up_by_the_solid_equals_the_inflow_through_the_top(comm):
     import ufl
 
     from app import compat
-    from app.model.problem import Problem
+    from app import factory
 
     cfg = small_bilayer(**{"time.end": 1.2})
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     st = time_stepper(p, cfg)
     u_n, _ = ufl.split(p.state)
     F = ufl.Identity(2) + ufl.grad(u_n)

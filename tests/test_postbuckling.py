@@ -18,7 +18,7 @@ from conftest import read_json, write_on_rank0
 from mpi4py import MPI
 
 from app import config
-from app.model.problem import layer_materials
+from app.factory import layer_materials
 from app.model.theory import film_wrinkling_wavelength
 from app.onset.contact import _segments_cross
 from app.schema import ConfigError
@@ -515,7 +515,7 @@ def test_a_tube_branch_is_followed_around_its_closed_passage(monkeypatch, tmp_pa
     assert {float(r["wrinkle_count"]) for r in branch} == {switch["wrinkle_count"]}
     amplitude = [float(r["amplitude_mm"]) for r in branch]
     assert all(b > a for a, b in zip(amplitude, amplitude[1:]))
-    from app.onset.wrinkles import boundary_displacement
+    from app.model.surface import boundary_displacement
 
     R = cfg["geometry"]["outer_radius"] - cfg["geometry"]["substrate_thickness"] - cfg["geometry"]["film_thickness"]
     by_time = {round(float(r["time"]), 12): float(r["amplitude_mm"]) for r in branch}
@@ -532,7 +532,7 @@ def test_a_tube_branch_is_followed_around_its_closed_passage(monkeypatch, tmp_pa
     # where the tangential displacement vanishes, so the two measures agree beyond second order there
     assert all(rel <= 1e-9 for _, _, rel, _ in compared), compared
     # a rigid translation of the state (the passage's n = 1 part) changes neither amplitude nor count
-    from app.onset.wrinkles import surface_shape
+    from app.model.surface import surface_shape
 
     t, problem, array = states[-1]
     moved = array.copy()

@@ -20,16 +20,16 @@ import subprocess
 import numpy as np
 import pytest
 import ufl
-from conftest import EXE, child_env, on_rank0
+from conftest import EXE, child_env, child_jobs, on_rank0, rank_local
 from scipy.optimize import brentq
 
 from app import compat, config
 from app.model import theory
 from app.model.hydrogel import HYDROGEL
-from app.model.problem import layer_materials
+from app.factory import layer_materials
 from app.reduced.halfspace import HalfSpace
 from app.reduced.onset import Screen, Stability, margin_curve, mode_grid
-from app.reduced.section import Section
+from app import factory
 from app.reduced.solve import n_max
 from app.reduced.transient import LayeredModel, Resolution, Transient
 from app.workflows import reduced
@@ -60,7 +60,7 @@ def test_steady_state_is_the_laterally_constrained_equilibrium():
     """A thin bilayer (ratio 8) swollen to equilibrium with mu_bar = 0: each layer at the closed-form stretch
     and fluid content of a laterally constrained layer, and the growth their sum. Measured 3e-10."""
     cfg = config.resolve({"geometry": {"length": 1.0, "substrate_thickness": 0.02, "film_thickness": 0.01}})
-    sec = Section.from_config(cfg)
+    sec = factory.section(cfg)
     m = LayeredModel(sec, Resolution(dt_max=100.0))
     tr = Transient(m)
     tr.run(2000.0)
@@ -91,7 +91,7 @@ def test_surface_crossing_comes_at_the_homogeneous_critical_stretch(criterion, r
     crossing time through the three steps around it: measured within 2e-5."""
     cfg = config.load("configs/bilayer.toml", [f"stability.criterion={criterion}",
                                                f"material.film.modulus_ratio={ratio}"])
-    sec = Section.from_config(cfg)
+    sec = factory.section(cfg)
     st = reduced.settings(cfg)
     m = LayeredModel(sec, st.resolution)
     stab = Stability(m, criterion)
@@ -113,6 +113,7 @@ def test_surface_crossing_comes_at_the_homogeneous_critical_stretch(criterion, r
     assert s == pytest.approx(theory.constrained_layer_fluid(film, ln), rel=1e-6)
 
 
+@rank_local
 def test_stiff_film_in_compression_wrinkles_at_the_film_on_substrate_strain():
     """Undrained compression of a film 50 times stiffer than its deep substrate (the case of
     test_stability's 2D check): the applied strain at the onset within 2.5% of (1/4)(3 Es/Ef)^(2/3)
@@ -141,6 +142,7 @@ def test_stiff_film_in_compression_wrinkles_at_the_film_on_substrate_strain():
     assert block["wavelength_mm"] == pytest.approx(l_c, rel=0.1)
 
 
+@rank_local
 def test_error_bar_covers_a_finer_computation():
     """The reduced answer of the default bilayer with its steps halved again (step_change / 2) and its mesh
     refined (film cells x 2): within the default answer's error bar, which is under 0.1% of g_c."""
@@ -173,6 +175,7 @@ def test_2d_default_onset_and_the_reduction_lie_within_each_others_error_bars(na
     assert on_disk["reduced"] == red
 
 
+@child_jobs
 def test_reduced_command_writes_its_result_and_refuses_what_it_cannot_reduce(shared_tmp):
     def run():
         out = shared_tmp / "red"
@@ -198,13 +201,14 @@ def test_reduced_command_writes_its_result_and_refuses_what_it_cannot_reduce(sha
 
 def test_mode_count_of_the_screen_reaches_the_largest_wavenumber():
     cfg = config.load("configs/bilayer.toml")
-    sec = Section.from_config(cfg)
+    sec = factory.section(cfg)
     n = n_max(sec, cfg["reduced"]["max_wavenumber"])
     assert sec.wavenumber(n) * sec.film_thickness >= cfg["reduced"]["max_wavenumber"]
     assert sec.wavenumber(n - 1) * sec.film_thickness < cfg["reduced"]["max_wavenumber"]
     assert sec.wrinkle_count(38) == 19 and sec.local_wavenumber(38) == pytest.approx(2 * math.pi / (2 * 2.0 / 38))
 
 
+@rank_local
 @pytest.mark.parametrize("sets", [[], ["geometry.film_thickness=0.05"]])
 def test_answer_does_not_depend_on_the_largest_wavenumber_screened(sets):
     """Screening modes up to k w = 80 instead of 20: the same answer (a finite mode, or the surface's
@@ -252,7 +256,7 @@ def test_mode_operator_of_a_homogeneous_layer_at_short_waves_is_the_surface_cond
     layer): it loses definiteness at the closed-form short-wave critical stretch (3.1410 drained, 3.3607
     undrained). Measured 1e-6 / 8e-6."""
     cfg = config.load("configs/bilayer.toml", ["material.film.modulus_ratio=1"])
-    sec = Section.from_config(cfg)
+    sec = factory.section(cfg)
     m = LayeredModel(sec, reduced.settings(cfg).resolution)
     stab = Stability(m, criterion)
     gel = sec.materials["film"]

@@ -14,10 +14,10 @@ import pytest
 from cases import swelling_case
 
 from app import config
-from app.model.problem import Problem
+from app import factory
 from app.model.theory import constrained_layer_stretch
 from app.solvers import newton, stepping
-from app.solvers.stability import StabilityAnalyzer
+from app.onset.criteria import rate_matrix
 from app.workflows.run import simulate
 
 H = 0.01  # layer thickness [mm]: substrate 0.005 + film 0.005 of the same material
@@ -55,7 +55,7 @@ def test_run_stops_at_equilibrium_with_the_analytic_thickness(gamma, chi, comm, 
     assert "equilibrium at t =" in on_disk["message"]
     assert on_disk["final"]["time"] < 1e-2 * cfg["time"]["end"]  # measured 14-106 s of 1e5 s
     assert len(rows) == on_disk["steps"] + 1
-    mat = Problem.from_config(cfg, comm).materials["substrate"]
+    mat = factory.problem(cfg, comm).materials["substrate"]
     lam = constrained_layer_stretch(mat, 0.0)
     thickness = H + on_disk["final"]["growth_mm"]
     assert thickness / (H * lam) - 1 == pytest.approx(0.0, abs=5e-3)
@@ -80,7 +80,7 @@ def _near_equilibrium_run(comm, floor: bool, monkeypatch):
         monkeypatch.setattr(newton, "STAGNATION", float("inf"))
     cfg = _layer(5.0, 0.4, end=1e7, dt_max=1e6)
     cfg["solver"]["atol"] = 1e-30
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     from app.workflows.run import RunSettings
 
     s = RunSettings.from_config(cfg)
@@ -126,7 +126,7 @@ def test_failing_steps_past_the_onset_are_diagnosed_not_cut_to_dt_min(comm, shar
 
     def spy(self, dt, reason, failures):
         counts["failures"], counts["t"], counts["tau"] = failures, self.t, dt
-        analyzer = StabilityAnalyzer.for_problem(self.p, dt)
+        analyzer = rate_matrix(self.p, dt)
         counts["nneg"] = analyzer.inertia()[0]
         analyzer.destroy()
         real(self, dt, reason, failures)
@@ -156,7 +156,7 @@ def test_diagnosis_lets_the_cut_back_go_on_where_K_is_positive_definite(comm, mo
         converged, iterations, reason, residual_norm = False, 25, -5, 1.0
 
     cfg = _layer(0.5, 0.4, end=1.0)
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     from app.workflows.run import RunSettings
 
     s = RunSettings.from_config(cfg)

@@ -14,7 +14,7 @@ import signal
 
 import pytest
 from cases import LONG
-from conftest import EXE, finish, on_rank0, read_json, run_child, start, wait_rows, write_on_rank0
+from conftest import EXE, child_jobs, finish, on_rank0, read_json, run_child, start, wait_rows, write_on_rank0
 
 from app import cli
 
@@ -51,6 +51,7 @@ def _same_report(ref: dict, got: dict) -> None:
     assert got["studies"]["time"]["values"] == pytest.approx(ref["studies"]["time"]["values"], rel=1e-10)
 
 
+@child_jobs
 def test_interrupted_converge_is_marked_and_continues_when_rerun(shared_tmp):
     """SIGINT during converge's base run: exit 130, no further level started, and the tables of what ran
     say "interrupted" (no Richardson estimate, no plot, convergence.md says so first) rather than look
@@ -84,6 +85,7 @@ def _interrupt_bench(out):
     return code, stdout, sorted(p.name for p in out.iterdir()), read_json(out / "run-coarse-np1" / "summary.json")
 
 
+@child_jobs
 def test_interrupted_bench_writes_no_result(shared_tmp):
     """SIGINT during bench's first size: exit 130, the second size never starts, and neither bench.json
     nor bench.md exists (the earlier one is removed when a bench starts): timings of a part of a run are

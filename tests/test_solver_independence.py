@@ -6,14 +6,14 @@ import numpy as np
 from conftest import run_to_end, small_bilayer
 
 from app import compat
-from app.solvers.stability import StabilityAnalyzer
+from app.onset.criteria import rate_matrix
 
 
 def test_analyzer_k_is_the_problems_k_and_leaves_the_problem_alone(comm):
     cfg = small_bilayer(**{"time.end": 0.05, "stability.enabled": "false"})
     p, _, _ = run_to_end(cfg, comm)  # a state with displacement and fluid
     tau = 0.01
-    analyzer = StabilityAnalyzer.for_problem(p, tau)
+    analyzer = rate_matrix(p, tau)
     # the coefficients are the analyzer's own, the compiled kernel the problem's (no second JIT compile)
     assert compat.form_signature(analyzer.op.k.form) == compat.form_signature(p.forms.hessian)
     w, step_tau = p.w.x.array.copy(), float(p.tau.value)

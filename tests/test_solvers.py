@@ -36,10 +36,10 @@ def test_solvers_leave_petsc_options_table_as_they_found_it(comm):
     solvers, so each must remove its own options once its linear solver is set up."""
     from petsc4py import PETSc
 
-    from app.model.problem import Problem
+    from app import factory
 
     cfg = small_bilayer(**{"time.end": 0.02})
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     before = len(PETSc.Options().getAll())
     for linear in ("direct", "iterative") * 3:
         cfg["solver"]["linear"] = linear

@@ -34,7 +34,7 @@ def test_compression_wrinkling_matches_stiff_film_theory(shared_tmp, comm):
         "output": {"fields": False, "plot": False}})
     s = simulate(cfg, shared_tmp / "comp", comm)
     assert s["status"] == "buckled"
-    from app.model.problem import layer_materials
+    from app.factory import layer_materials
 
     mats = layer_materials(cfg)
     eps_c = film_wrinkling_strain(mats["film"], mats["substrate"])

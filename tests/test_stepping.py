@@ -18,7 +18,7 @@ from conftest import run_to_end, small_bilayer
 from mpi4py import MPI
 
 from app import cli, compat, config
-from app.model.problem import Problem
+from app import factory
 from app.workflows.run import simulate
 from app.solvers.step_control import CUTBACK, GROW_MAX, SAFETY, SHRINK_MIN
 
@@ -114,7 +114,7 @@ def test_newton_failure_is_cut_back_and_the_run_recovers(shared_tmp, comm):
     results = {}
     for max_it in (25, 3):
         cfg = small_bilayer(**base, **{"solver.max_it": max_it})
-        p = Problem.from_config(cfg, comm)
+        p = factory.problem(cfg, comm)
         s = simulate(cfg, shared_tmp / f"it{max_it}", comm, problem=p, progress=False)
         results[max_it] = (s, cell_fluid_content(p), _history(shared_tmp / f"it{max_it}"))
     ref, cut = results[25][0], results[3][0]

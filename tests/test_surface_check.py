@@ -17,7 +17,7 @@ import pytest
 from app import config
 from app.model import theory
 from app.model.material import chemical_potential, first_piola
-from app.model.problem import layer_materials
+from app.factory import layer_materials
 from app.onset.surface import SurfaceState
 from app.workflows import reduced
 from app.workflows.run import simulate

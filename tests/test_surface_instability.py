@@ -18,7 +18,7 @@ import pytest
 
 from app import config
 from app.model import theory
-from app.model.problem import layer_materials
+from app.factory import layer_materials
 from app.workflows.run import simulate
 
 H, W = 0.1, 0.01

@@ -12,9 +12,9 @@ from conftest import time_stepper
 from scipy.spatial import cKDTree
 
 from app import compat, config, geometry
-from app.model.problem import Problem
+from app import factory
 from app.workflows.run import simulate
-from app.onset.wrinkles import boundary_displacement
+from app.model.surface import boundary_displacement
 from app.geometry import bilayer, msh, tube
 from meshes import tube as tube_model
 
@@ -66,7 +66,7 @@ def test_impossible_tubes_are_rejected_with_the_limit():
 def _uptake_mismatch(cfg, comm) -> np.ndarray:
     """Per accepted step: (the fluid taken up by the solid, computed from u alone as the change of
     int (J J0 - 1) dV at the penalty's one point per cell, minus the inflow through the passage) / inflow."""
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     st = time_stepper(p, cfg)
     u_n, _ = ufl.split(p.state)
     form = compat.form((ufl.det(ufl.Identity(2) + ufl.grad(u_n)) * p.mat.preswelling - 1) * p.dx_coupling)
@@ -97,7 +97,7 @@ def test_tube_takes_up_the_fluid_that_enters_through_the_passage(comm):
 
 def test_circular_tube_swells_axisymmetrically(comm):
     cfg = tube_case("time.end=0.6", "stability.enabled=false")
-    p = Problem.from_config(cfg, comm)
+    p = factory.problem(cfg, comm)
     st = time_stepper(p, cfg)
     while not st.done():
         rec = st.advance()

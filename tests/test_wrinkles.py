@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from app.onset.wrinkles import circumferential_wavenumber, wrinkle_count
+from app.model.surface import circumferential_wavenumber, wrinkle_count
 
 L = 2.0
 X = np.linspace(0, L, 201)
@@ -40,7 +40,7 @@ def test_unsorted_input_and_circumferential():
 
 
 def test_band_vertex_finds_the_dispersion_minimum():
-    from app.onset.wrinkles import band_vertex
+    from app.onset.bisection import band_vertex
 
     counts = [16.5, 17, 17.5, 18, 18.5, 19, 19.5, 18, 0.5]
     lam = [0.02 * (n - 17.8) ** 2 - 1e-3 for n in counts]
@@ -65,7 +65,7 @@ def test_band_vertex_rounding_is_the_same_for_both_parities(step, parity):
     """The count nearest the fitted vertex; a vertex exactly halfway between two counts goes to the
     one with the lower sampled eigenvalue (equal: the smaller count), whatever the parity of the
     count / step (half-to-even rounding used to send 9.75 up to 10 and 10.25 down to 10)."""
-    from app.onset.wrinkles import band_vertex
+    from app.onset.bisection import band_vertex
 
     n = 10.0 + parity * step  # an even and an odd multiple of the step
     rng = np.random.default_rng(int(4 * n))

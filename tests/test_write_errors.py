@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 from cases import LONG
 from conftest import (
+    child_jobs,
     EXE,
     MPIRUN,
     PYTHON,
@@ -166,6 +167,7 @@ def _fields_fill_the_disk(toml, out, ranks):
     return first, table, summary, step, times, resumed
 
 
+@child_jobs
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_a_disk_filled_by_the_fields_stops_the_run_with_one_line(ranks, long_runs, tmpfs):
     """The fields fill a 400 kB disk after about 13 steps. Before a field output the disk cannot take
@@ -180,7 +182,7 @@ def test_a_disk_filled_by_the_fields_stops_the_run_with_one_line(ranks, long_run
     first, table, summary, step, times, resumed = on_rank0(_fields_fill_the_disk, toml, out, ranks)
     line = f"hydrobuckle: error: cannot write {out / 'fields.h5'}: {NO_SPACE}"
     # The run ends without MPI_Finalize (HDF5 holds the unwritable file and its close in MPI_Finalize
-    # hung: compat.end_process); when rank 0 has ended, Open MPI 5's launcher ends the other rank and
+    # hung: interrupt.end_process); when rank 0 has ended, Open MPI 5's launcher ends the other rank and
     # sometimes says so with a PMIx line of its own (measured: 1 of 5 runs on Debian 13).
     said = [ln for ln in ours(first.stderr) if "PMIX ERROR: PMIX_ERR_UNREACH" not in ln]
     assert first.returncode == 2 and said == [line], first.stderr[-3000:]
@@ -228,6 +230,7 @@ def _history_fills_the_disk(toml, out, disk, ranks):
     return code, err, table, summary, step, resumed
 
 
+@child_jobs
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_a_disk_filled_while_history_grows_keeps_whole_rows(ranks, long_runs, tmpfs):
     """Once the run has a checkpoint, the disk is filled and kept full: history.csv (rank 0's rows) soon
@@ -264,6 +267,7 @@ def _hdf5_meets_the_full_disk(toml, out, ranks):
     return done, time.monotonic() - t0, valid_history(out / "history.csv")
 
 
+@child_jobs
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_a_failure_inside_hdf5_is_agreed_on_without_a_hang(ranks, shared_tmp, tmpfs):
     """A 0.3 mm strip (70 kB of fields per step) on a 200 kB disk, the reservation off: HDF5's write

@@ -11,7 +11,7 @@ import pytest
 from conftest import small_bilayer
 
 from app.io.output import FIELDS
-from app.model.problem import Problem
+from app import factory
 from app.workflows.run import simulate
 
 h5py = pytest.importorskip("h5py")
@@ -46,7 +46,7 @@ def test_fields_and_mode_are_one_dataset_with_the_solver_values(shared_tmp, comm
     every = 3
     cfg = small_bilayer(**{"time.end": 1.0, "output.fields": "true", "output.every": every, "stability.modes": 2})
     out = shared_tmp / "xdmf"
-    problem = Problem.from_config(cfg, comm)
+    problem = factory.problem(cfg, comm)
     summary = simulate(cfg, out, comm, problem=problem, progress=False)
     assert summary["status"] == "buckled"
     with open(out / "history.csv") as f:

@@ -36,3 +36,24 @@ def check(cfg: dict, comm) -> None:
     building a mesh (a user .msh: missing, unreadable, groups the config names but the file lacks).
     Everything else is checked by ``config.validate``. Commands call this before they create any result."""
     kind_of(cfg).check_input(cfg, comm)
+
+
+def export(cfg: dict, out, comm) -> str:
+    """``hydrobuckle mesh``: build the geometry of ``cfg`` and write its gmsh mesh to ``out``; the line that
+    says what was written (cell and facet groups). A kind without a gmsh model of its own (a user's .msh) is
+    a ConfigError naming geometry.kind."""
+    from pathlib import Path
+
+    from app.schema import ConfigError
+
+    kind = kind_of(cfg)
+    if not kind.exportable:
+        able = [k.name for k in KINDS if k.exportable]
+        raise ConfigError("geometry.kind", f"{kind.name!r} {kind.not_exportable_because}; allowed here: "
+                          + ", ".join(able))
+    out = Path(out)
+    if comm.rank == 0:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    tm = kind.build(cfg, comm, msh_path=str(out)).tm
+    return (f"wrote {out}: cell groups {sorted(tm.cell_names)}, facet groups {sorted(tm.facet_names)}; "
+            f"{tm.info}")

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from app.registry import Registry
-from app.schema import ConfigError, Key
+from app.schema import ConfigError, Key, gt, key
 
 BOUNDARY_ROLES = ("permeable", "impermeable", "free", "fixed", "roller_x", "roller_y")
 # displacement components a role holds at zero
@@ -91,6 +91,12 @@ MAX_CELLS = 5_000_000
 # memory of a serial run: RSS of the bilayer benchmark (docs/performance.md), 276/507/789 MB at
 # 28836/73610/122222 dofs, fitted linearly; more ranks add about the base each
 MEMORY_BASE_MB, MEMORY_PER_DOF_KB = 120.0, 5.5
+
+
+def layer_keys(substrate: float, film: float) -> dict[str, Key]:
+    """The thickness keys of a kind with a film on a substrate, with that kind's defaults [mm]."""
+    return {"substrate_thickness": key(float, substrate, gt(0), "H [mm]", unit="mm"),
+            "film_thickness": key(float, film, gt(0), "w [mm]", unit="mm")}
 
 
 def structured_size(along: int, layers: int, closed: bool, what: str) -> dict:

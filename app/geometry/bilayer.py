@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from app.geometry.base import Drive, GeometryKind, GeometrySetup
+from app.geometry.base import Drive, GeometryKind, GeometrySetup, layer_keys
 from app.schema import ConfigError, gt, key
 
 if TYPE_CHECKING:
@@ -16,8 +16,7 @@ class Bilayer(GeometryKind):
     name = "bilayer"
     keys = {
         "length": key(float, 2.0, gt(0), "L [mm] (bilayer)", unit="mm"),
-        "substrate_thickness": key(float, 0.5, gt(0), "H [mm]", unit="mm"),
-        "film_thickness": key(float, 0.01, gt(0), "w [mm]", unit="mm"),
+        **layer_keys(substrate=0.5, film=0.01),
     }
     mesh_defaults = {"element_size": 0.004, "film_layers": 8}
     film_element_fraction = 0.4

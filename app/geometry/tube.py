@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from app.geometry.base import GeometryKind, GeometrySetup
+from app.geometry.base import GeometryKind, GeometrySetup, layer_keys
 from app.schema import ConfigError, gt, in_closed, key
 
 if TYPE_CHECKING:
@@ -18,8 +18,7 @@ class Tube(GeometryKind):
     name = "tube"
     keys = {
         "outer_radius": key(float, 1.0, gt(0), "R [mm] (tubes)", unit="mm"),
-        "substrate_thickness": key(float, 0.2, gt(0), "H [mm]", unit="mm"),
-        "film_thickness": key(float, 0.02, gt(0), "w [mm]", unit="mm"),
+        **layer_keys(substrate=0.2, film=0.02),
     }
     mesh_defaults = {"element_size": 0.01, "film_layers": 4}
     film_element_fraction = 0.5

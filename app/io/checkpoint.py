@@ -39,11 +39,12 @@ from pathlib import Path
 import numpy as np
 
 from app import compat, config
+from app.geometry import dofmaps
 
 FILE = "checkpoint.npz"
 FORMAT = 1
 KEY_BASE = 1 << 31  # a facet's key: lo * KEY_BASE + hi (input node indices < 2^31)
-# the branch's surface profiles (app.onset.wrinkles.SurfaceProfiles.arrays) and their members in the file
+# the branch's surface profiles (app.model.surface.SurfaceProfiles.arrays) and their members in the file
 PROFILE_MEMBERS = {"growth_mm": "profile_growth", "time": "profile_time", "position": "profile_position",
                    "profile": "profile_value"}
 
@@ -142,16 +143,16 @@ class DofLayout:
         if orig.size and orig.max() >= KEY_BASE:
             raise RuntimeError(f"input node index {orig.max()} >= 2^31: facet keys would overflow")
         X = compat.node_coordinates(p.domain)
-        nodes = compat.lagrange1_dof_nodes(p.V_u)  # per local displacement block
+        nodes = dofmaps.lagrange1_dof_nodes(p.V_u)  # per local displacement block
         self.u_key, self.u_x = orig[nodes], X[nodes]
-        ends = compat.facet_nodes(p.domain)[compat.facet_of_dofs(p.V_q)]  # (n_q, 2) geometry nodes
+        ends = dofmaps.facet_nodes(p.domain)[dofmaps.facet_of_dofs(p.V_q)]  # (n_q, 2) geometry nodes
         swap = orig[ends[:, 0]] > orig[ends[:, 1]]
         lo = np.where(swap, ends[:, 1], ends[:, 0])
         hi = np.where(swap, ends[:, 0], ends[:, 1])
         self.q_key = orig[lo] * KEY_BASE + orig[hi]
         t = X[hi] - X[lo]
         canonical = np.column_stack([t[:, 1], -t[:, 0]])
-        n_dof = compat.facet_dof_normals(p.V_q)
+        n_dof = dofmaps.facet_dof_normals(p.V_q)
         dot = np.einsum("ij,ij->i", n_dof, canonical)
         if (np.abs(dot) < 0.5 * np.linalg.norm(n_dof, axis=1) * np.linalg.norm(canonical, axis=1)).any():
             raise RuntimeError("a flux dof's normal is not along its facet's normal")
@@ -412,8 +413,8 @@ class Resume:
     profile_arrays: dict | None = None  # PROFILE_MEMBERS' keys -> arrays; None before a branch
 
     def profiles(self):
-        """The followed branch's :class:`~app.onset.wrinkles.SurfaceProfiles` up to the checkpoint."""
-        from app.onset.wrinkles import SurfaceProfiles
+        """The followed branch's :class:`~app.model.surface.SurfaceProfiles` up to the checkpoint."""
+        from app.model.surface import SurfaceProfiles
 
         if not self.profile_arrays:
             return SurfaceProfiles()

@@ -252,7 +252,7 @@ class ResultWriter:
         except ResultWriteError as err:
             self._record(err)
         polys = _gather_cells(problem, base.x.array, mode.x.array)
-        from app.onset.wrinkles import along_profile, around_profile, boundary_displacement
+        from app.model.surface import along_profile, around_profile, boundary_displacement
 
         groups = problem.geo.facets_with_role("permeable")
         coords, disp = boundary_displacement(problem, crossing.mode, groups)
@@ -306,7 +306,7 @@ class ResultWriter:
 
     def plot_branch(self, profiles, critical: dict | None) -> None:
         """After a followed branch: the surface profiles themselves, profiles.npz (growth, time, position and
-        profile of every step on the branch; :class:`app.onset.wrinkles.SurfaceProfiles`), and wrinkles.png
+        profile of every step on the branch; :class:`app.model.surface.SurfaceProfiles`), and wrinkles.png
         and amplitude.png if plots are written (collective, like :meth:`plot_history`)."""
         if not profiles:
             return
@@ -358,6 +358,7 @@ def field_expressions(problem):
     After a step is accepted, problem.state holds (u, Q) and problem.w the step's (u, dQ). The stress
     is the Cauchy stress sigma = P F^T / det F and the chemical potential mu = dpsi/ds, both by UFL
     differentiation of the material law's psi."""
+    from app.model.kinematics import deformation_gradient, fluid_content
     from app.model.material import first_piola
 
     domain = problem.domain
@@ -367,8 +368,8 @@ def field_expressions(problem):
     u, Q = ufl.split(problem.state)
     _, dQ = ufl.split(problem.w)
     mat = problem.mat
-    F = ufl.variable(ufl.Identity(2) + ufl.grad(u))
-    s = mat.s0 - ufl.div(Q)
+    F = ufl.variable(deformation_gradient(u))
+    s = fluid_content(mat.s0, Q)
     J = ufl.det(F)
     sigma = first_piola(mat, F, s) * F.T / J
     mean = 0.5 * (sigma[0, 0] + sigma[1, 1])

@@ -170,7 +170,7 @@ def modes_gallery(rows: list[dict], outdir, title: str, path) -> None:
     deformed passage outline of a tube."""
     import numpy as np
 
-    from app.onset.wrinkles import along_profile, around_profile
+    from app.model.surface import along_profile, around_profile
 
     cases = [r for r in rows if (outdir / r["directory"] / "mode_surface.csv").is_file()]
     if not cases:
@@ -243,7 +243,7 @@ def isomode_plot(rows: list[dict], title: str, param: str, path) -> None:
 
 
 def wrinkles_plot(profiles: list[tuple], critical: dict | None, closed: bool, path, count: int = 8) -> None:
-    """Surface profiles (the detrended normal displacement, app.onset.wrinkles.surface_profile) at up to
+    """Surface profiles (the detrended normal displacement, app.model.surface.surface_profile) at up to
     ``count`` growths, evenly spaced from the first to the last, each offset by its rank, as wrinkle
     profiles are shown in experimental papers. ``profiles``: (growth_mm, time, position, profile) tuples."""
     if not profiles:

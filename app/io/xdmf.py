@@ -76,7 +76,7 @@ class FieldSeries:
     :class:`~app.io.writes.ResultWriteError` on every rank (naming the .h5 file, or the .xdmf file for
     its XML): rank 0 first reserves the bytes the write needs (:func:`app.io.writes.reserve`), so a full
     disk stops it before any rank enters HDF5; an HDF5 failure all the same is agreed on by every rank,
-    and the file is then abandoned, never closed (:func:`app.compat.abandon`)."""
+    and the file is then abandoned, never closed (:func:`app.io.hdf5.abandon`)."""
 
     BALLAST = 64 * 1024  # kept aside for the close, which writes HDF5's last metadata (measured: 4 kB)
 
@@ -113,8 +113,7 @@ class FieldSeries:
         """Run the HDF5 ``actions`` on every rank, after reserving their space (unless ``data_bytes`` is
         None), and agree on the outcome of each before the next: a rank that failed must not leave the
         others inside the next one's collectives (measured: a hang when they agreed only after all)."""
-        from app import compat
-        from app.io import writes
+        from app.io import hdf5, writes
 
         size0 = self.h5.stat().st_size if self.comm.rank == 0 and self.h5.is_file() else 0
         if data_bytes is not None:
@@ -122,7 +121,7 @@ class FieldSeries:
                            self.BALLAST)
         for action in actions:
             local = None
-            with compat.HDF5Errors() as errors:
+            with hdf5.HDF5Errors() as errors:
                 try:
                     action()
                 except RuntimeError as err:
@@ -141,11 +140,10 @@ class FieldSeries:
             self._grown = max(0, self.h5.stat().st_size - size0)
 
     def _abandon(self) -> None:
-        from app import compat
-        from app.io import writes
+        from app.io import hdf5, writes
 
         if self._file is not None:
-            compat.abandon(self._file)
+            hdf5.abandon(self._file)
             self._file = None
         writes.release(self.comm, self.ballast)
 

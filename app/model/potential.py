@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import ufl
 
 from app import compat
+from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.material import chemical_potential
 
 
@@ -51,8 +52,8 @@ def kinematics(w, state):
     """Deformation gradient, fluid content of the step and of the previous state."""
     u, dQ = ufl.split(w)
     u_n, Q_n = ufl.split(state)
-    F = ufl.Identity(2) + ufl.grad(u)
-    F_n = ufl.Identity(2) + ufl.grad(u_n)
+    F = deformation_gradient(u)
+    F_n = deformation_gradient(u_n)
     return u, dQ, F, F_n, Q_n
 
 
@@ -66,8 +67,8 @@ def build(w, state, mat, tau, mu_bar, dx, ds_permeable, dx_coupling=None) -> Pot
     it enforces the constraint against the cell's (constant) fluid content once per cell, as a
     Q1/P0 pair does, instead of at every Gauss point, which locks Q1 elements in bending."""
     u, dQ, F, F_n, Q_n = kinematics(w, state)
-    s_n = mat.s0 - ufl.div(Q_n)
-    s = s_n - ufl.div(dQ)
+    s_n = fluid_content(mat.s0, Q_n)
+    s = fluid_content(s_n, dQ)
     C_n = F_n.T * F_n
     bulk, constraint = mat.law.free_energy(F, s, mat)
     energy = bulk * dx + constraint * (dx_coupling or dx) + mat.law.dissipation(dQ, C_n, s_n, tau, mat) * dx

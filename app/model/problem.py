@@ -1,5 +1,5 @@
 """The discrete problem: mesh, spaces, per-cell materials, boundary conditions and loading, built from
-typed objects; :meth:`Problem.from_config` is the one place a resolved config becomes them.
+typed objects (:func:`app.factory.problem` makes them from a resolved config).
 
 One :class:`Problem` holds everything a time step needs: the unknown w = (u, dQ), the converged
 previous state (u_n, Q_n), the compiled residual/Hessian forms, the Dirichlet conditions and the
@@ -13,8 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 import ufl
 
-from app import compat, config, geometry
+from app import compat
 from app.geometry import GeometrySetup
+from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.loading import BoundaryConditions, Loading
 from app.model.material import Material
 from app.model.potential import CompiledForms, build, fields_class
@@ -35,25 +36,8 @@ class Discretization:
         return cls(mesh["quadrature_degree"], mesh["coupling_quadrature_degree"], cfg["time"]["dt_initial"])
 
 
-def layer_materials(cfg: dict, names=("film", "substrate")) -> dict[str, Material]:
-    """Parameters of each named material (film, substrate, [material.layers.*]) under the config's law."""
-    law = config.law(cfg)
-    return {name: law.material(config.layer_parameters(cfg, name)) for name in names}
-
-
 class Problem:
     """The discrete incremental minimization problem of one configuration."""
-
-    @classmethod
-    def from_config(cls, cfg: dict, comm, setup: GeometrySetup | None = None) -> Problem:
-        """The problem of a resolved config (the boundary where config dicts become objects): the geometry
-        (built unless given), each layer's material, the loading (its surface ramp starting at the mu0
-        of the material under the permeable surface) and the discretization settings."""
-        setup = setup if setup is not None else geometry.build(cfg, comm)
-        materials = layer_materials(cfg, sorted(set(setup.layers.values())))
-        surface = setup.material_under("permeable", comm)
-        loading = Loading.from_config(cfg, mu_start=materials[surface].mu0, drive=setup.drive)
-        return cls(comm, setup, materials, loading, Discretization.from_config(cfg))
 
     def __init__(self, comm, setup: GeometrySetup, materials: dict[str, Material], loading: Loading,
                  discretization: Discretization = Discretization()):
@@ -168,11 +152,11 @@ class Problem:
         one = compat.Constant(self.domain, compat.ScalarType(1.0))
         self.surface_length = compat.assemble_scalar(compat.form(one * self.ds_permeable), self.comm)
         self._growth_form = compat.form(ufl.dot(u_n, n) * self.ds_permeable)
-        self._fluid_form = compat.form((self.mat.s0 - ufl.div(Q_n)) * self.dx)
+        self._fluid_form = compat.form(fluid_content(self.mat.s0, Q_n) * self.dx)
         self._influx_form = compat.form(-ufl.dot(dQ, n) * self.ds_permeable)
         # the stored energy of the converged state (the incremental potential without dissipation and load)
-        F_n = ufl.Identity(2) + ufl.grad(u_n)
-        bulk, constraint = self.mat.law.free_energy(F_n, self.mat.s0 - ufl.div(Q_n), self.mat)
+        F_n = deformation_gradient(u_n)
+        bulk, constraint = self.mat.law.free_energy(F_n, fluid_content(self.mat.s0, Q_n), self.mat)
         self._stored_form = compat.form(bulk * self.dx + constraint * self.dx_coupling)
         self._growth_dof = None
         if self.geo.growth == "vertex":
@@ -207,7 +191,7 @@ class Problem:
         normal; for tubes the mean inward radial displacement of the passage's nodes (arc-length
         weighted); or the inward displacement of one point (elliptic passage: minor-axis vertex)."""
         if self.geo.growth == "mean_radial":
-            from app.onset.wrinkles import around_profile, boundary_displacement
+            from app.model.surface import around_profile, boundary_displacement
 
             coords, disp = boundary_displacement(self, self.state.x.array, self.geo.facets_with_role("permeable"))
             _, radial, weights, _ = around_profile(coords, disp, centre=(0.0, 0.0))
@@ -226,8 +210,8 @@ class Problem:
 
     def surface_shape(self, array=None) -> tuple[float, float]:
         """(amplitude [mm], wrinkle count) of the permeable surface's shape in ``array`` (default: the converged
-        state); :func:`app.onset.wrinkles.surface_shape`."""
-        from app.onset.wrinkles import surface_shape
+        state); :func:`app.model.surface.surface_shape`."""
+        from app.model.surface import surface_shape
 
         return surface_shape(self, self.state.x.array if array is None else array)
 

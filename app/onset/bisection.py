@@ -6,15 +6,17 @@ midpoint (with the same error-controlled stepping) until its width is below ``to
 to the crossing time. At the two final ends SLEPc gives lambda_min; the critical time and growth are
 linear interpolations in lambda_min between them, and the eigenvector of the crossing eigenvalue at
 the unstable end is the buckling mode. The wrinkle count N_c is the vertex of lambda(N) over the
-eigenpairs nearest zero there (:func:`app.onset.wrinkles.band_vertex`).
+eigenpairs nearest zero there (:func:`band_vertex`).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from app.model.surface import mode_wrinkle_count
 from app.onset.crossing import Crossing
-from app.onset.wrinkles import band_vertex, mode_wrinkle_count
 
 BAND_MODES = 8  # eigenpairs sampled at the unstable end to locate the minimum of lambda(N)
 
@@ -74,3 +76,35 @@ class Bisection:
             lambda_min_before=lam_lo, lambda_min_after=lam_hi, bracket=(lo.t, hi.t),
             negative_eigenvalues=base_count + 1, modes=modes, bisection_solves=solves, mode=mode_pair.vector,
             state=p.state.x.array.copy(), lo=lo, hi=hi, hi_count=hi_count)
+
+
+def band_vertex(counts, eigenvalues, step: float = 0.5) -> float | None:
+    """Wrinkle count at the minimum of the dispersion curve lambda(N) sampled by several modes.
+
+    Near a wrinkling onset the eigenvalues of neighbouring wrinkle counts are nearly equal, so which
+    of them crosses zero first is decided by tiny details. Around the count n0 with the lowest
+    eigenvalue (equal lowest eigenvalues: the smaller count), a parabola through the lowest
+    eigenvalue of each count within n0 +- 2 steps (at least one on each side) locates the minimum of
+    lambda(N). The result is the count (a multiple of ``step``) nearest to the parabola's vertex,
+    with the vertex kept within one step of n0, so the answer is n0 or one of its neighbours. A
+    vertex halfway between two counts (to 1e-9 of a step, e.g. data mirrored about that point)
+    goes to the one nearer n0, i.e. to n0 itself, whatever the parity of n0 / step. Far-away counts
+    (global modes, the other branch of the dispersion curve) are left out of the fit.
+    None if no such fit exists."""
+    lowest: dict[float, float] = {}
+    for n, lam in zip(counts, eigenvalues):
+        if n is None or not np.isfinite(lam) or n <= 0:
+            continue
+        lowest[n] = min(lam, lowest.get(n, np.inf))
+    if not lowest:
+        return None
+    n0 = min(lowest, key=lambda n: (lowest[n], n))
+    near = sorted(n for n in lowest if abs(n - n0) <= 2 * step + 1e-9)
+    if len(near) < 3 or min(near) >= n0 or max(near) <= n0:
+        return None
+    a, b, _ = np.polyfit(near, [lowest[n] for n in near], 2)
+    if a <= 0:
+        return None
+    offset = min(max(-b / (2 * a) - n0, -step), step) / step  # vertex - n0 in steps, in [-1, 1]
+    k = math.floor(abs(offset) + 0.5 - 1e-9)  # nearest whole step; a tie rounds towards n0
+    return n0 + math.copysign(k * step, offset)

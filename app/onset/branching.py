@@ -1,14 +1,14 @@
 """Switching onto the buckled branch at a located crossing (``stability.after_onset = "branch"``).
 
 At the crossing's unstable end the state is perturbed along the crossing's mode, scaled so that the
-mode's surface amplitude (:func:`app.onset.wrinkles.surface_shape`) is ``stability.imperfection`` times the
+mode's surface amplitude (:func:`app.model.surface.surface_shape`) is ``stability.imperfection`` times the
 film thickness, and the stepper switches to the minimizing step solver
 (:class:`app.solvers.minimizer.MinimizingNewton`), which from then on cannot settle on the unbuckled saddle.
 
 What the perturbation must contain depends on the criterion (docs/postbuckling.md). A mode that moves
 fluid (the drained one) is a displacement *and* a change of each cell's fluid content; a displacement alone
 would be undone by the next step, whose potential does not depend on the previous displacement. The drained
-mode's content change c = -K_cc^-1 K_cu u (the eliminated block of :class:`~app.solvers.stability.DrainedOperator`)
+mode's content change c = -K_cc^-1 K_cu u (the eliminated block of :class:`~app.model.operators.DrainedHessian`)
 is carried by a flux increment dQ added to the accumulated flux Q_n: dQ minimizes the quadratic of K_tau
 with the displacement held at the mode, for a tau far beyond the run's time, which makes Div dQ = c up to
 (cell diffusion time / tau) and picks the least-dissipative such flux. The fluid it brings in through the
@@ -21,12 +21,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from petsc4py import PETSc
 
 from app import compat
-from app.onset.wrinkles import surface_profile, surface_shape
-from app.solvers import mumps
-from app.solvers.stability import RateOperator, free_to_local
+from app.model.operators import zero_increment_hessian
+from app.model.surface import surface_profile, surface_shape
+from app.solvers.stability import HessianOperator, solve_with_held
 
 TAU_FACTOR = 1e8  # the flux of a content change: tau = this x (elapsed time + ramp scale), see the docstring
 
@@ -80,7 +79,8 @@ def oriented(problem, mode: np.ndarray) -> np.ndarray:
 class BranchSwitcher:
     """Applies the perturbation of :mod:`app.onset.branching` to a problem's converged state."""
 
-    def __init__(self, problem, stepper, criterion: str, imperfection: float, length: float, log=None):
+    def __init__(self, problem, stepper, criterion, imperfection: float, length: float, log=None):
+        """``criterion``: the run's :class:`app.onset.criteria.Criterion` (whether its mode needs its content)."""
         self.p, self.stepper, self.criterion = problem, stepper, criterion
         self.imperfection, self.length = imperfection, length
         self.log = log or (lambda msg: None)
@@ -96,7 +96,7 @@ class BranchSwitcher:
             amplitude = float(np.max(np.abs(mode[p.u_dofs]))) or 1.0
         scale = self.imperfection * self.length / amplitude
         delta = scale * mode
-        with_flux = self.criterion == "drained" and p.diffusion  # the drained mode is a displacement only
+        with_flux = self.criterion.adds_content and p.diffusion  # the drained mode is a displacement only
         if with_flux:
             delta[p.q_dofs] = self.content_flux(delta)
         before = p.fluid_volume()
@@ -117,47 +117,26 @@ class BranchSwitcher:
         return rec
 
     def content_flux(self, delta: np.ndarray) -> np.ndarray:
-        """The flux dQ whose divergence is the drained content change of displacement ``delta`` (local q part)."""
+        """The flux dQ whose divergence is the drained content change of displacement ``delta`` (local q part):
+        K_tau's minimizer over dQ with the displacement held at ``delta``."""
         p = self.p
         tau = TAU_FACTOR * max(self.stepper.t, self.stepper.dt_prev, 1e-12)
-        op = RateOperator(p, tau)
-        ksp = None
-        options = mumps.PrefixedOptions("hbbranch", mumps.direct("cholesky", {}))
+        op = HessianOperator(zero_increment_hessian(p, tau), p.comm)
         try:
             op.matrix()
-            A = op.A
             n_owned = compat.owned_size(p.W)
-            fixed = op.fixed()
             is_q = np.zeros(n_owned, dtype=bool)
             is_q[p.q_dofs[p.q_dofs < n_owned]] = True
-            free_q = compat.owned_index_set(p.W, np.flatnonzero(is_q & ~fixed), p.comm)
-            z = A.createVecRight()
+            free_q = compat.owned_index_set(p.W, np.flatnonzero(is_q & ~op.fixed()), p.comm)
+            z = op.A.createVecRight()
             z.array[:] = 0.0
             u_owned = p.u_dofs[p.u_dofs < n_owned]
             z.array[u_owned] = delta[u_owned]
-            r = A.createVecLeft()
-            A.mult(z, r)
-            Kqq = A.createSubMatrix(free_q, free_q)
-            Kqq.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-            rhs = r.getSubVector(free_q)
-            b = rhs.copy()
-            r.restoreSubVector(free_q, rhs)
-            b.scale(-1.0)
-            x = b.duplicate()
-            ksp = PETSc.KSP().create(p.comm)
-            ksp.setOptionsPrefix(options.prefix)
-            ksp.setFromOptions()
-            ksp.setOperators(Kqq)
-            ksp.solve(b, x)
-            full = A.createVecRight()
-            out = free_to_local(x, free_q, full, p.W)[p.q_dofs]
-            for obj in (z, r, Kqq, b, x, full, free_q):
+            out = solve_with_held(op.A, free_q, z, p.W, p.comm)[p.q_dofs]
+            for obj in (z, free_q):
                 obj.destroy()
             return out
         finally:
-            options.clear()
-            if ksp is not None:
-                ksp.destroy()
             op.destroy()
 
     def export_state(self) -> dict:

@@ -16,7 +16,8 @@ import ufl
 from mpi4py import MPI
 
 from app import compat
-from app.onset.wrinkles import boundary_displacement, surface_tangent
+from app.model.kinematics import deformation_gradient
+from app.model.surface import boundary_displacement, surface_tangent
 
 
 @dataclass
@@ -82,7 +83,7 @@ class InversionCheck:
         self.V0 = compat.scalar_space(problem.domain, "DG", 0)
         self._u = compat.Function(problem.V_u)
         self._J = compat.Function(self.V0)
-        self._expr = compat.expression(ufl.det(ufl.Identity(2) + ufl.grad(self._u)), self.V0)
+        self._expr = compat.expression(ufl.det(deformation_gradient(self._u)), self.V0)
         self._mid = None
 
     def __call__(self, array: np.ndarray) -> Limit | None:

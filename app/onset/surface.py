@@ -25,16 +25,21 @@ import numpy as np
 import ufl
 
 from app import compat
+from app.geometry import dofmaps
+from app.solvers.local import LocalSystem
 
 
 class SurfaceCheck:
     """The per-step short-wave check of one problem's permeable surface (collective)."""
 
-    def __init__(self, problem, criterion: str):
+    def __init__(self, problem, criterion):
+        """``criterion``: the run's :class:`app.onset.criteria.Criterion`; the check uses its short-wave
+        counterpart (``criterion.surface``: drained or undrained)."""
         from app.reduced.halfspace import HalfSpace
 
         p = problem
-        self.problem, self.comm, self.criterion = p, p.comm, criterion
+        self.problem, self.comm, self.criterion = p, p.comm, criterion.surface
+        self._label = criterion.surface_label()
         domain = p.domain
         tdim = domain.topology.dim
         domain.topology.create_connectivity(tdim - 1, tdim)
@@ -67,7 +72,7 @@ class SurfaceCheck:
         # the surface state in equilibrium with the bath, one cell per facet
         self.vertex_nodes = np.array([v2g[f2v.links(f)] for f in self.facets], dtype=np.int64).reshape(-1, 2)
         self.length = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
-        self.node_dofs = compat.lagrange1_dof_nodes(p.V_u)  # geometry node of each displacement dof block
+        self.node_dofs = dofmaps.lagrange1_dof_nodes(p.V_u)  # geometry node of each displacement dof block
         first = next(iter(p.materials.values()))
         point_materials = [p.materials.get(name) if name else first for name in self.material]
         # the 1D forms are compiled on rank 0 first, then loaded from the cache by the others (no two
@@ -75,7 +80,7 @@ class SurfaceCheck:
         self.equilibrium = self.halfspace = None
         for turn in (0, 1):
             if (self.comm.rank == 0) == (turn == 0):
-                self.halfspace = HalfSpace(first, criterion)
+                self.halfspace = HalfSpace(first, self.criterion)
                 self.equilibrium = SurfaceState(point_materials or [first])
             self.comm.barrier()
         if not len(self.facets):
@@ -158,7 +163,7 @@ class SurfaceCheck:
                 "criterion": self._criterion_name(), "bracket": [t0, time]}
 
     def _criterion_name(self) -> str:
-        return self.criterion if self.criterion != "rate" else "drained (the short-wave limit of rate)"
+        return self._label
 
 
 class SurfaceState:
@@ -196,8 +201,7 @@ class SurfaceState:
         v = ufl.TestFunction(W)
         dx = ufl.Measure("dx", domain=d, metadata={"quadrature_degree": 1})
         res = (P[0, 1] * v[0] + P[1, 1] * v[1] + (mu - self.mu_bar) * v[2]) * dx
-        self.residual = compat.form(res)
-        self.jacobian = compat.form(ufl.derivative(res, self.w, ufl.TrialFunction(W)))
+        self.system = LocalSystem(compat.form(res), compat.form(ufl.derivative(res, self.w, ufl.TrialFunction(W))))
         self.dofs = []
         for i in range(3):
             Vi, dofs = compat.collapse(W.sub(i))
@@ -205,7 +209,6 @@ class SurfaceState:
         x = self.w.x.array
         x[self.dofs[1]] = 1.0
         x[self.dofs[2]] = [m.s0 for m in materials]
-        self._A = None
 
     def solve(self, column: np.ndarray, mu_bar: float, tol: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
         """(F (N, 2, 2), s (N,)) at the tangential columns ``column`` (N, 2) and the bath's mu_bar."""
@@ -222,14 +225,8 @@ class SurfaceState:
             return y[js].min() > 0 and (column[:, 0] * y[ib] - column[:, 1] * y[ia]).min() > 0
 
         for _ in range(60):
-            b = compat.assemble_vector(self.residual)
-            r = b.array.copy()
-            b.destroy()
-            if self._A is None:
-                self._A = compat.create_matrix(self.jacobian)
-            compat.assemble_matrix_into(self._A, self.jacobian, [])
-            indptr, indices, values = compat.matrix_csr(self._A)
-            K = sp.csr_matrix((values, indices, indptr), shape=self._A.getSize())
+            r, (indptr, indices, values) = self.system.assemble()
+            K = sp.csr_matrix((values, indices, indptr), shape=self.system.shape)
             dx = spla.spsolve(K.tocsc(), -r)
             step = 1.0
             while step > 1e-8 and not admissible(x + step * dx):

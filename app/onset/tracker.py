@@ -11,14 +11,14 @@ stepper at the state the run continues from. With ``stability.enabled = false`` 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from app.onset.bisection import Bisection
 from app.onset.policy import AfterCrossing, CrossingPolicy
 from app.onset.screening import StabilityScreen
-from app.solvers.stability import StabilityAnalyzer
+from app.onset.criteria import CRITERIA, DEFAULT, Criterion
 
 
 @dataclass(frozen=True)
@@ -30,29 +30,29 @@ class StabilitySettings:
     policy: CrossingPolicy = CrossingPolicy()
     modes: int = 3  # eigenpairs reported at a crossing
     eigen_every: int = 0  # lambda_min every n steps (0: only at crossings)
-    tau: float = 1e-2  # step in the dissipation block of the tested K (criterion "rate" only)
     screening: str = "newton"
     error_estimate: bool = False  # companion runs after the run (app.workflows.error_estimate)
-    criterion: str = "drained"  # which Hessian decides stability (app.solvers.stability)
+    criterion: str = DEFAULT  # which perturbations count (app.onset.criteria)
+    params: dict = field(default_factory=lambda: {"tau": 1e-2})  # the criterion's parameters (its keys)
     imperfection: float = 0.01  # after_onset = branch: the mode's surface amplitude / film thickness
     surface_check: bool = True  # the permeable surface's short-wave limit every step (app.onset.surface)
 
     @classmethod
     def from_config(cls, cfg: dict) -> StabilitySettings:
         s = cfg["stability"]
+        rule = CRITERIA.get(s["criterion"])
         return cls(s["enabled"], s["tolerance"],
                    CrossingPolicy.from_flags(s["stop_at_onset"], s["max_crossings"], s.get("after_onset")),
-                   s["modes"], s["eigen_every"], s["tau"], s["screening"], s["error_estimate"], s["criterion"],
-                   s.get("imperfection", 0.01), s.get("surface_check", True))
+                   s["modes"], s["eigen_every"], s["screening"], s["error_estimate"], s["criterion"],
+                   {k: s[k] for k in rule.keys}, s.get("imperfection", 0.01), s.get("surface_check", True))
+
+    @property
+    def rule(self) -> Criterion:
+        return CRITERIA.get(self.criterion)
 
     def newton_screen_valid(self, dt: float) -> bool:
-        """Whether the Newton factor of a step of size dt (K_dt) has at least the criterion's negative
-        eigenvalues, so that screening with it cannot miss a crossing (app.onset.screening)."""
-        if self.criterion == "undrained":
-            return True
-        if self.criterion == "rate":
-            return dt >= 2.0 * self.tau
-        return False
+        """Whether the Newton factor of a step of size dt may screen the criterion (app.onset.screening)."""
+        return self.rule.newton_may_screen(self.params, dt)
 
 
 def onset_tracker(problem, stepper, settings: StabilitySettings, on_first_crossing=None, log=None, detail=None,
@@ -75,7 +75,7 @@ class OnsetTracker:
         self.settings, self.stepper = settings, stepper
         self.log = log or (lambda msg: None)
         detail = detail or (lambda msg: None)
-        self.analyzer = StabilityAnalyzer.for_problem(problem, settings.tau, settings.criterion)
+        self.analyzer = settings.rule.analyzer(problem, settings.params)
         self.screen = StabilityScreen(stepper, self.analyzer, settings.screening, log=detail,
                                       newton_screen_valid=settings.newton_screen_valid)
         self.bisection = Bisection(problem, stepper, self.analyzer, tolerance=settings.tolerance,
@@ -94,11 +94,11 @@ class OnsetTracker:
                 and problem.geo.facets_with_role("permeable"):
             from app.onset.surface import SurfaceCheck
 
-            self.surface = SurfaceCheck(problem, settings.criterion)
+            self.surface = SurfaceCheck(problem, settings.rule)
         if settings.policy.branches:
             from app.onset.branching import BranchSwitcher, typical_cell_size
 
-            self.branch = BranchSwitcher(problem, stepper, settings.criterion, settings.imperfection,
+            self.branch = BranchSwitcher(problem, stepper, settings.rule, settings.imperfection,
                                          reference_length or typical_cell_size(problem), log=self.log)
 
     def start(self, rec) -> None:
@@ -188,7 +188,7 @@ class OnsetTracker:
             if criterion == chosen:
                 continue
             try:
-                analyzer = StabilityAnalyzer.for_problem(p, self.settings.tau, criterion)
+                analyzer = CRITERIA.get(criterion).analyzer(p, self.settings.params)
             except ValueError:
                 continue
             try:
@@ -241,8 +241,7 @@ class OnsetTracker:
             | {"energy_rejections": st.energy_rejections}}}
 
     def criterion_summary(self) -> dict:
-        s = self.settings
-        return {"name": s.criterion, **({"tau": s.tau} if s.criterion == "rate" else {})}
+        return self.settings.rule.summary(self.settings.params)
 
     def tests_summary(self) -> dict:
         s = self.screen

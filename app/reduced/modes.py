@@ -26,8 +26,8 @@ import scipy.linalg as sla
 import ufl
 
 from app import compat
+from app.reduced.section import CRITERIA
 
-CRITERIA = ("drained", "undrained", "rate")
 
 
 def reduced_gradient(shape: str, k, U, V, r):

@@ -17,6 +17,7 @@ from app.model.loading import Loading
 from app.model.material import Material
 
 KINDS = ("bilayer", "tube")
+CRITERIA = ("drained", "undrained", "rate")  # the stability criteria with a 1D counterpart (modes.py)
 LOADINGS = {"bilayer": ("swelling", "compression"), "tube": ("swelling",)}
 
 
@@ -45,25 +46,6 @@ class Section:
     materials: dict[str, Material]
     loading: Loading
     film: str = "film"
-
-    @classmethod
-    def from_config(cls, cfg: dict) -> Section:
-        from app.model.problem import layer_materials
-
-        why = reducible(cfg)
-        if why:
-            raise NotReducible(why)
-        geo = cfg["geometry"]
-        materials = layer_materials(cfg)
-        loading = Loading.from_config(cfg, mu_start=materials["film"].mu0, drive=_drive(cfg))
-        H, w = geo["substrate_thickness"], geo["film_thickness"]
-        if geo["kind"] == "bilayer":
-            layers = (Layer("substrate", 0.0, H), Layer("film", H, H + w))
-            return cls("planar", layers, H + w, 0.0, geo["length"], materials, loading)
-        R = geo["outer_radius"]
-        a = R - H - w
-        layers = (Layer("film", a, a + w), Layer("substrate", a + w, R))
-        return cls("axisymmetric", layers, a, R, None, materials, loading)
 
     @property
     def film_layer(self) -> Layer:
@@ -119,7 +101,7 @@ def _graded(length: float, first: float, ratio: float, from_start: bool) -> np.n
     return x if from_start else length - x[::-1]
 
 
-def _drive(cfg: dict):
+def drive(cfg: dict):
     from app.geometry.base import Drive
 
     geo = cfg["geometry"]
@@ -135,6 +117,9 @@ def reducible(cfg: dict) -> str:
     if lo["kind"] not in LOADINGS[geo["kind"]]:
         return (f"loading.kind = {lo['kind']!r}: the 1D reduction of a {geo['kind']} covers "
                 f"{', '.join(LOADINGS[geo['kind']])}")
+    criterion = cfg["stability"]["criterion"]
+    if criterion not in CRITERIA:
+        return f"stability.criterion = {criterion!r}: the 1D reduction covers {', '.join(CRITERIA)}"
     extra = set(cfg["material"].get("layers", {}) or {})
     if extra:
         return "material.layers: the 1D reduction covers the two-layer film/substrate section only"

@@ -26,6 +26,7 @@ from app import compat
 from app.model.material import chemical_potential
 from app.model.potential import fields_class
 from app.reduced.section import Section
+from app.solvers.local import LocalSystem
 
 
 class TransientFailed(RuntimeError):
@@ -77,7 +78,7 @@ class LayeredModel:
         self.r = ufl.SpatialCoordinate(d)[0]
         self.weight = self.r if section.shape == "axisymmetric" else 1.0
         self._flat = None
-        self._A = None
+        self._system = None  # the residual and Hessian assembled for SciPy (created at the first assembly)
         self._forms()
         self.fixed = self._fixed_dofs()
         self.surface_v = self._dof_at(self.v_dofs, self.x_v, section.surface)
@@ -160,13 +161,9 @@ class LayeredModel:
     def assemble(self):
         """(residual, Hessian in LAPACK general band storage in coordinate order :attr:`order`) at the
         current w: a 1D system is banded."""
-        b = compat.assemble_vector(self.residual)
-        r = b.array.copy()
-        b.destroy()
-        if self._A is None:
-            self._A = compat.create_matrix(self.hessian)
-        compat.assemble_matrix_into(self._A, self.hessian, [])
-        indptr, indices, values = compat.matrix_csr(self._A)
+        if self._system is None:
+            self._system = LocalSystem(self.residual, self.hessian)
+        r, (indptr, indices, values) = self._system.assemble()
         if self._flat is None:
             self._band_pattern(indptr, indices)
         ab = np.zeros((2 * self.bandwidth + 1) * len(r))

@@ -1,34 +1,18 @@
-"""Structural stability of a converged state: inertia of a Hessian on the free dofs, and its smallest
-eigenpairs, under one of three criteria (``stability.criterion``; docs/validation.md, "Which instabilities
-count").
+"""The linear algebra of the stability tests: a Hessian's inertia on its free dofs and its smallest eigenpairs.
+Which matrix counts is the criterion's choice (:mod:`app.onset.criteria`); its form is written in
+:mod:`app.model.operators`; nothing here reads a problem.
 
-The incremental potential Pi^tau(u, dQ) is a stored energy plus a dissipation (1/tau) D(dQ, dQ) with D
-positive semi-definite, so its Hessian is K_tau = K_inf + D/tau. Each criterion is a symmetric matrix
-whose inertia (negative-eigenvalue count, Sylvester's law) decides stability:
-
-- ``"drained"``: does any perturbation of the displacement and of the fluid distribution lower the stored
-  energy? This is K_inf with the flux's divergence-free part (which K_inf does not see: the stored energy
-  depends on dQ only through s = s_n - Div dQ) removed. The fluid content a flux can change is one number
-  per cell (RTCF's divergence is c/det J on a cell), so the test takes the stored energy's Hessian in
-  (u, c), u in Q1, c in DG0, and eliminates c exactly: its block is diagonal (one dof per cell), so the
-  Schur complement S = K_uu - K_uc K_cc^-1 K_cu is an explicit sparse matrix on the displacement dofs, and
-  In(K) = In(K_cc) + In(S) (Haynsworth). A gradient flow leaves a state exactly when this test fails: the
-  default, and the limit tau -> infinity of K_tau.
-- ``"undrained"``: the fluid frozen (tau -> 0): K_uu at fixed fluid content, the displacement block of
-  K_tau (the dissipation does not touch it). Biot's surface instability of an incompressible solid.
-- ``"rate"``: K_tau with ``stability.tau``: instabilities that grow faster than about 1/tau. The seed paper's
-  choice when tau is the step.
-
-Each Hessian is evaluated at the converged state (u_n, Q_n) at zero increment, on coefficients of its
-own. Ordering: for every tau, negatives(undrained) <= negatives(K_tau) <= negatives(drained) (K_uu is a
-principal block of K_tau; K_tau decreases with tau), so the drained onset comes first.
-
-- ``inertia()``: the exact counts of negative, zero and positive eigenvalues from an LDL^T (MUMPS
-  Cholesky) factorization. With ``screening = "newton"`` most steps may read the Newton factor's inertia
-  instead where that is safe for the criterion (:mod:`app.onset.screening`).
-- ``eigenpairs(n)``: the n eigenpairs nearest zero (SLEPc Krylov-Schur, shift-invert, target 0,
-  Hermitian), with the eigenvectors embedded back into the full mixed space (drained, undrained: the
-  displacement part; the flux part zero).
+- :class:`HessianOperator`: a compiled Hessian (K_tau) on the free dofs of its space, optionally only on a kept
+  subset (the displacement block K_uu of the undrained test).
+- :class:`DrainedOperator`: a Hessian in (u, c), c one content dof per cell, with c eliminated exactly: its
+  block is diagonal, so the Schur complement S = K_uu - K_uc K_cc^-1 K_cu is an explicit sparse matrix on
+  the displacement dofs, and In(K) = In(K_cc) + In(S) (Haynsworth).
+- :class:`StabilityAnalyzer`: ``inertia()``, the exact counts of negative, zero and positive eigenvalues from an
+  LDL^T (MUMPS Cholesky) factorization; ``eigenpairs(n)``, the n eigenpairs nearest zero (SLEPc
+  Krylov-Schur, shift-invert, target 0, Hermitian), the eigenvectors embedded back into the problem's mixed
+  space; ``lambda_min``, certified by the inertia.
+- :func:`solve_with_held`: a Hessian's minimizer over some dofs with the others held (the branch's flux of a
+  content change).
 
 Dirichlet dofs are removed (free-dof submatrix), not kept with unit diagonal, which would add
 spurious eigenvalues.
@@ -36,16 +20,13 @@ spurious eigenvalues.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-import ufl
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
 from app import compat, timing
-from app.model.potential import build
 from app.solvers import mumps
 
 
@@ -55,76 +36,33 @@ class Eigenpair:
     vector: np.ndarray  # local array (owned + ghosts) in the mixed space W
 
 
-@dataclass
-class OwnHessian:
-    """A compiled Hessian form and the coefficients it is evaluated on, owned by its user."""
+class HessianOperator:
+    """A Hessian (:class:`app.model.operators.OwnHessian`: its form, space, conditions and refresh) on its free
+    dofs, optionally only those among ``keep`` (local indices of the space): K_tau for the criterion "rate" and
+    the cut-back diagnosis, its displacement block K_uu for "undrained"."""
 
-    form: object
-    work: object  # (u, dQ): the increment K is evaluated at
-    state: object  # (u_n, Q_n): the previous state
-    tau: object  # Constant: the step in the dissipation block
-
-
-def zero_increment_hessian(problem, tau: float) -> OwnHessian:
-    """K of the problem's incremental potential on coefficients of its own.
-
-    ``work`` is the (u, dQ) the Hessian is evaluated at and ``state`` the previous state (u_n, Q_n),
-    both refreshed from the problem's converged state before each assembly; the material fields are
-    copied once and ``tau`` is a Constant of its own. The coefficients are created in the order the
-    problem creates its own (unknown, state, material fields, then the constants tau and mu_bar), so
-    the form has the problem's form signature: the same compiled kernel (JIT cache hit) and a K
-    identical to the one assembled from the problem's own coefficients, bit for bit."""
-    p = problem
-    work, state = compat.Function(p.W), compat.Function(p.W)
-    fields = {}
-    for f in dataclasses.fields(p.mat):  # whatever record of per-cell fields the material law has
-        source = getattr(p.mat, f.name)
-        fields[f.name] = compat.Function(source.function_space)
-        fields[f.name].x.array[:] = source.x.array
-    tau_c = compat.Constant(p.domain, compat.ScalarType(tau))
-    mu_bar = compat.Constant(p.domain, compat.ScalarType(0.0))  # does not enter K (linear in dQ)
-    pot = build(work, state, type(p.mat)(**fields), tau_c, mu_bar, p.dx, p.surface_measure, p.dx_coupling)
-    return OwnHessian(compat.form(pot.hessian), work, state, tau_c)
-
-
-CRITERIA = ("drained", "undrained", "rate")
-
-
-class RateOperator:
-    """K_tau on the free dofs of the mixed space W (criterion "rate"; the cut-back diagnosis)."""
-
-    def __init__(self, problem, tau: float):
-        self.k = zero_increment_hessian(problem, tau)
-        self.tau = tau
-        self.source, self.u_dofs, self.bcs, self.comm = problem.state, problem.u_dofs, problem.bcs, problem.comm
-        self.W = problem.W
+    def __init__(self, hessian, comm, keep: np.ndarray | None = None):
+        self.k, self.comm, self.W, self.bcs = hessian, comm, hessian.space, hessian.bcs
         self.A = compat.create_matrix(self.k.form)
-        self.is_free = compat.owned_index_set(self.W, self._free_local(), self.comm)
+        free = ~self.fixed()
+        if keep is not None:
+            kept = np.zeros_like(free)
+            kept[keep[keep < kept.size]] = True
+            free &= kept
+        self.is_free = compat.owned_index_set(self.W, np.flatnonzero(free), self.comm)
         self.n_free = self.is_free.getSize()
         self.Kf = None
         self._full = self.A.createVecRight()
 
     def fixed(self) -> np.ndarray:
-        """Owned dofs of W under a Dirichlet condition."""
+        """Owned dofs of the space under a Dirichlet condition."""
         fixed = np.zeros(compat.owned_size(self.W), dtype=bool)
         fixed[compat.owned_bc_dofs(self.bcs, self.W)] = True
         return fixed
 
-    def _free_local(self) -> np.ndarray:
-        return np.flatnonzero(~self.fixed())
-
-    def _set_zero_increment(self) -> None:
-        """Own coefficients at the converged state: (u, dQ) = (u_n, 0)."""
-        s = self.source.x.array
-        self.k.state.x.array[:] = s
-        w = self.k.work.x.array
-        w[:] = 0.0
-        w[self.u_dofs] = s[self.u_dofs]
-        self.k.tau.value = self.tau
-
     def matrix(self) -> PETSc.Mat:
-        """The criterion's matrix at the current converged state (free dofs only)."""
-        self._set_zero_increment()
+        """The matrix at the current converged state (free dofs only); ``A`` holds it on the whole space."""
+        self.k.refresh()
         compat.assemble_matrix_into(self.A, self.k.form, self.bcs)
         if self.Kf is None:
             self.Kf = self.A.createSubMatrix(self.is_free, self.is_free)
@@ -138,7 +76,7 @@ class RateOperator:
         return 0
 
     def embed(self, x_free: PETSc.Vec) -> np.ndarray:
-        """Free-dof vector -> local array (owned + ghost) of the full mixed space W."""
+        """Free-dof vector -> local array (owned + ghost) of the full space."""
         return free_to_local(x_free, self.is_free, self._full, self.W)
 
     def destroy(self) -> None:
@@ -147,70 +85,32 @@ class RateOperator:
                 obj.destroy()
 
 
-class UndrainedOperator(RateOperator):
-    """K_uu: the displacement block of K_tau on its free dofs (fluid frozen; tau does not enter)."""
-
-    def __init__(self, problem):
-        super().__init__(problem, 1.0)
-
-    def _free_local(self) -> np.ndarray:
-        is_u = np.zeros(compat.owned_size(self.W), dtype=bool)
-        u = self.u_dofs[self.u_dofs < is_u.size]
-        is_u[u] = True
-        return np.flatnonzero(is_u & ~self.fixed())
-
-
 class DrainedOperator:
-    """The drained test: the stored energy's Hessian in (u, c) on Q1 x DG0 with the fluid content c of
-    each cell eliminated (Schur complement on the free displacement dofs)."""
+    """The drained test: a Hessian in (u, c) (:class:`app.model.operators.DrainedHessian`) with the content c
+    of each cell eliminated, S = K_uu - K_uc K_cc^-1 K_cu on the free displacement dofs."""
 
-    def __init__(self, problem):
-        p = problem
-        self.problem, self.comm, self.source = p, p.comm, p.state
-        self.Wd = compat.mixed_displacement_content_space(p.domain)
-        self.work = compat.Function(self.Wd)  # (u, c): u = u_n, c = 0
-        self.state = compat.Function(p.W)  # (u_n, Q_n)
-        u, c = ufl.split(self.work)
-        _, Q_n = ufl.split(self.state)
-        F = ufl.Identity(2) + ufl.grad(u)
-        # the content an RTCF flux changes in a cell: (div of the reference field, a constant) / det J
-        s = p.mat.s0 - ufl.div(Q_n) - c / ufl.JacobianDeterminant(p.domain)
-        bulk, constraint = p.mat.law.free_energy(F, s, p.mat)
-        energy = bulk * p.dx + constraint * p.dx_coupling
-        v, dv = ufl.TestFunction(self.Wd), ufl.TrialFunction(self.Wd)
-        self.form = compat.form(ufl.derivative(ufl.derivative(energy, self.work, v), self.work, dv))
-        self.bcs = p.fixed_displacement_conditions(self.Wd.sub(0))
-        self.A = compat.create_matrix(self.form)
-        self.Vd_u, self.ud_dofs = compat.collapse(self.Wd.sub(0))
-        _, c_dofs = compat.collapse(self.Wd.sub(1))
-        n_owned = compat.owned_size(self.Wd)
+    def __init__(self, hessian, comm):
+        self.h, self.comm = hessian, comm
+        space = hessian.space
+        self.A = compat.create_matrix(hessian.form)
+        n_owned = compat.owned_size(space)
         fixed = np.zeros(n_owned, dtype=bool)
-        fixed[compat.owned_bc_dofs(self.bcs, self.Wd)] = True
+        fixed[compat.owned_bc_dofs(hessian.bcs, space)] = True
         is_u = np.zeros(n_owned, dtype=bool)
-        is_u[self.ud_dofs[self.ud_dofs < n_owned]] = True
-        self.is_free = compat.owned_index_set(self.Wd, np.flatnonzero(is_u & ~fixed), self.comm)
-        self.is_c = compat.owned_index_set(self.Wd, c_dofs[c_dofs < n_owned], self.comm)
+        is_u[hessian.u_dofs[hessian.u_dofs < n_owned]] = True
+        c_dofs = hessian.c_dofs
+        self.is_free = compat.owned_index_set(space, np.flatnonzero(is_u & ~fixed), self.comm)
+        self.is_c = compat.owned_index_set(space, c_dofs[c_dofs < n_owned], self.comm)
         self.n_free = self.is_free.getSize()
         self.S = None
         self._sub: dict = {}  # K_uu, K_uc, K_cc (kept: same patterns every assembly)
         self._negative_c = 0
         self._full = self.A.createVecRight()
 
-    def _set_zero_increment(self) -> None:
-        p = self.problem
-        s = self.source.x.array
-        self.state.x.array[:] = s
-        u = compat.Function(p.V_u)
-        u.x.array[:] = s[p.u_dofs]
-        ud = compat.Function(self.Vd_u)
-        compat.interpolate(ud, u)
-        self.work.x.array[:] = 0.0
-        self.work.x.array[self.ud_dofs] = ud.x.array
-
     def matrix(self) -> PETSc.Mat:
         """S = K_uu - K_uc K_cc^-1 K_cu on the free displacement dofs."""
-        self._set_zero_increment()
-        compat.assemble_matrix_into(self.A, self.form, self.bcs)
+        self.h.refresh()
+        compat.assemble_matrix_into(self.A, self.h.form, self.h.bcs)
         sub = self._sub
         for name, rows, cols in (("uu", self.is_free, self.is_free), ("uc", self.is_free, self.is_c),
                                  ("cc", self.is_c, self.is_c)):
@@ -240,14 +140,7 @@ class DrainedOperator:
 
     def embed(self, x_free: PETSc.Vec) -> np.ndarray:
         """Free displacement vector -> local array of W (the mode's displacement; flux part zero)."""
-        p = self.problem
-        ud = compat.Function(self.Vd_u)
-        ud.x.array[:] = free_to_local(x_free, self.is_free, self._full, self.Wd)[self.ud_dofs]
-        u = compat.Function(p.V_u)
-        compat.interpolate(u, ud)
-        out = np.zeros_like(p.state.x.array)
-        out[p.u_dofs] = u.x.array
-        return out
+        return self.h.to_problem_space(free_to_local(x_free, self.is_free, self._full, self.h.space))
 
     def destroy(self) -> None:
         for obj in (self.S, *self._sub.values(), self.A, self.is_free, self.is_c, self._full):
@@ -268,37 +161,49 @@ def free_to_local(x_free: PETSc.Vec, is_free: PETSc.IS, full: PETSc.Vec, space) 
     return f.x.array.copy()
 
 
-def criterion_operator(problem, criterion: str, tau: float | None = None):
-    """The matrix whose inertia decides stability under ``criterion`` (see the module docstring)."""
-    if criterion == "rate":
-        return RateOperator(problem, tau)
-    if criterion == "undrained" or not problem.diffusion:  # no fluid motion: drained = undrained
-        return UndrainedOperator(problem)
-    if criterion == "drained":
-        if problem.permeable_facets() == 0:
-            raise ValueError("stability.criterion = 'drained' needs a permeable boundary (the fluid content of a "
-                             "closed body is conserved); use 'undrained' or 'rate'")
-        return DrainedOperator(problem)
-    raise ValueError(f"stability.criterion must be one of {', '.join(CRITERIA)}, got {criterion!r}")
+def solve_with_held(A: PETSc.Mat, free: PETSc.IS, held: PETSc.Vec, space, comm) -> np.ndarray:
+    """The minimizer of 1/2 y^T A y over y = held + x with x on the ``free`` dofs only (A symmetric, positive
+    definite there): A_ff x = -(A held)_f by an LDL^T (MUMPS). Returns x as a local array (owned + ghost) of
+    ``space`` (A's space), zero off ``free``."""
+    ksp = None
+    options = mumps.PrefixedOptions("hbheld", mumps.direct("cholesky", {}))
+    try:
+        r = A.createVecLeft()
+        A.mult(held, r)
+        Aff = A.createSubMatrix(free, free)
+        Aff.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        rhs = r.getSubVector(free)
+        b = rhs.copy()
+        r.restoreSubVector(free, rhs)
+        b.scale(-1.0)
+        x = b.duplicate()
+        ksp = PETSc.KSP().create(comm)
+        ksp.setOptionsPrefix(options.prefix)
+        ksp.setFromOptions()
+        ksp.setOperators(Aff)
+        ksp.solve(b, x)
+        full = A.createVecRight()
+        out = free_to_local(x, free, full, space)
+        for obj in (r, Aff, b, x, full):
+            obj.destroy()
+        return out
+    finally:
+        options.clear()
+        if ksp is not None:
+            ksp.destroy()
 
 
 class StabilityAnalyzer:
-    """Inertia and eigenpairs of a criterion's matrix at a state (the problem's converged state, read
-    only); use :meth:`for_problem`."""
+    """Inertia and eigenpairs of a criterion's matrix (an operator above: ``matrix``, ``embed``,
+    ``eliminated_negatives``, ``n_free``) at the converged state its form reads; a criterion builds it
+    (:meth:`app.onset.criteria.Criterion.analyzer`)."""
 
-    def __init__(self, operator, criterion: str, comm):
-        self.op, self.criterion, self.comm = operator, criterion, comm
-        self.tau = getattr(operator, "tau", None) if criterion == "rate" else None
+    def __init__(self, operator, comm):
+        self.op, self.comm = operator, comm
         self.n_free = operator.n_free
         self._ksp = None
         self._ksp_options = None
         self.tests = 0  # exact inertia tests (each one LDL^T factorization)
-
-    @classmethod
-    def for_problem(cls, problem, tau: float | None = None, criterion: str = "rate") -> StabilityAnalyzer:
-        """The analyzer of a problem's converged state (``problem.state``) under ``criterion`` (``tau``:
-        the step in K_tau for "rate")."""
-        return cls(criterion_operator(problem, criterion, tau), criterion, problem.comm)
 
     def assemble(self) -> PETSc.Mat:
         """The criterion's matrix at the current converged state, on the free dofs."""

@@ -88,7 +88,7 @@ class StepRecord:
     inflow: float
     applied_strain: float
     error_estimate: float = float("nan")
-    amplitude_mm: float = 0.0  # the surface's wrinkle amplitude (app.onset.wrinkles.surface_shape)
+    amplitude_mm: float = 0.0  # the surface's wrinkle amplitude (app.model.surface.surface_shape)
     wrinkle_count: float = 0.0
     energy: float = float("nan")  # stored energy of the state (Problem.stored_energy)
     extra: dict = field(default_factory=dict)
@@ -115,7 +115,7 @@ class Snapshot:
 class TimeStepper:
     """Advances a :class:`app.model.problem.Problem` in time."""
 
-    def __init__(self, problem, time: TimeSettings, solver: SolverSettings, log=None):
+    def __init__(self, problem, time: TimeSettings, solver: SolverSettings, log=None, limits=None):
         self.p = problem
         self.end = time.end
         self.max_steps = time.max_steps
@@ -144,14 +144,16 @@ class TimeStepper:
         self._setup_error_form()
         self.minimizing = False  # past an onset with stability.after_onset = "branch": follow_minimizers
         self.energy_rejections = 0  # minimizer solves whose energy ended above the initial guess's
-        self.limits = None  # app.onset.contact.ModelLimits once minimizing
+        # where a followed branch ends: limits(problem) -> a check of an array (app.onset.contact.ModelLimits),
+        # built once minimizing; None: no limits
+        self._limits_of = limits
+        self.limits = None
 
     def follow_minimizers(self) -> None:
         """From now on every step minimizes Pi^tau (app.solvers.minimizer.MinimizingNewton): the state past
         an onset. Newton's counters carry over; the run also checks for self-contact and inverted cells."""
         if self.minimizing:
             return
-        from app.onset.contact import ModelLimits
         from app.solvers.minimizer import MinimizingNewton
 
         p, old = self.p, self.solver
@@ -160,7 +162,7 @@ class TimeStepper:
         self.solver.set_counters(old.counters())
         old.destroy()
         self.minimizing = True
-        self.limits = ModelLimits(p)
+        self.limits = self._limits_of(p) if self._limits_of is not None else None
 
     def relax(self) -> bool:
         """Minimize Pi at the current time from the current state, without advancing: a perturbed state settles
@@ -322,7 +324,7 @@ class TimeStepper:
     def _limit_of(self, array: np.ndarray):
         """On the branch: the :class:`app.onset.contact.Limit` ``array`` (a state or a failed step's last
         iterate) reaches, an inverted cell or a self-intersecting surface, else None."""
-        if not np.all(np.isfinite(array[self.p.u_dofs])):
+        if self.limits is None or not np.all(np.isfinite(array[self.p.u_dofs])):
             return None
         return self.limits(array)
 
@@ -339,13 +341,16 @@ class TimeStepper:
         as the first when diffusion is off). Negative eigenvalues in either mean the state has lost
         stability and no smaller step can follow the fundamental path: raise :class:`LostStability`
         instead of cutting back to dt_min. Both positive definite let the cut-back go on."""
-        from app.solvers.stability import StabilityAnalyzer
+        from app.model.operators import drained_hessian, zero_increment_hessian
+        from app.solvers.stability import DrainedOperator, HessianOperator, StabilityAnalyzer
 
-        found = []
-        for criterion in ("rate", "drained") if self.p.diffusion else ("rate",):
-            if criterion == "drained" and self.p.permeable_facets() == 0:
+        p, found = self.p, []
+        for criterion in ("rate", "drained") if p.diffusion else ("rate",):
+            if criterion == "drained" and p.permeable_facets() == 0:
                 continue
-            analyzer = StabilityAnalyzer.for_problem(self.p, dt, criterion)
+            op = (HessianOperator(zero_increment_hessian(p, dt), p.comm) if criterion == "rate" else
+                  DrainedOperator(drained_hessian(p), p.comm))
+            analyzer = StabilityAnalyzer(op, p.comm)
             try:
                 nneg = analyzer.inertia()[0]
             finally:

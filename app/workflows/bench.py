@@ -225,3 +225,80 @@ def table(doc: dict) -> str:
 
 def _f(v):
     return "-" if v is None else f"{v:.3g}"
+
+
+def parse_sizes(text: str) -> list[str]:
+    """``--sizes``: known names, each at most once (one result per size); else a ConfigError."""
+    sizes = [x.strip() for x in text.split(",") if x.strip()]
+    bad = [x for x in sizes if x not in SIZES]
+    if bad or not sizes:
+        raise config.ConfigError("--sizes", f"{','.join(bad) or '(none)'}; allowed: " + ", ".join(SIZES))
+    twice = sorted({x for x in sizes if sizes.count(x) > 1})
+    if twice:
+        raise config.ConfigError("--sizes", f"{','.join(twice)} given more than once; allowed: each of "
+                                 + ", ".join(SIZES) + " at most once")
+    return sizes
+
+
+def parse_ranks(text: str | None, comm) -> list[int] | None:
+    """``--ranks``: positive rank counts to launch under mpirun (not from inside mpirun); None: this job."""
+    if not text:
+        return None
+    try:
+        ranks = [int(x) for x in text.split(",")]
+    except ValueError:
+        ranks = [0]
+    if any(k < 1 for k in ranks):
+        raise config.ConfigError("--ranks", f"= {text}; allowed: positive integers, e.g. 1,2")
+    if comm.size > 1:
+        raise config.ConfigError("--ranks", "launches mpirun itself: run `hydrobuckle bench --ranks ...` "
+                                 "without mpirun")
+    return ranks
+
+
+def check(sizes: list[str], overrides: list[str], outdir: Path, comm) -> None:
+    """The pre-flight of every size's config (app.workflows.preflight), then the directory claimed."""
+    from app.workflows import preflight
+
+    size_cfgs = [size_config(name, overrides) for name in sizes]
+    for cfg, name in zip(size_cfgs, sizes):
+        preflight.mesh_size(cfg, False, f"bench size {name}")
+    preflight.check(size_cfgs, comm, outdir, sizes=False)
+
+
+def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], outdir: Path, comm,
+            json_only: str | None = None) -> str | None:
+    """``hydrobuckle bench``: run (or launch per rank count) every size and write bench.json and bench.md;
+    returns the table (rank 0; '' elsewhere and for a ``--json-only`` launch), or None when interrupted (no
+    bench.json: timings of a part of a run are no benchmark). A stale bench.json/bench.md goes first: a
+    directory holds them only once a bench has ended. Raises BenchFailed and ResultWriteError."""
+    from app.io import writes
+
+    def clear():
+        for name in ("bench.json", "bench.md"):
+            (outdir / name).unlink(missing_ok=True)
+
+    with interrupt.Watch(comm):  # a signal between two sizes is recorded too: no further size starts
+        if not json_only:
+            writes.on_rank0(comm, outdir, clear)
+        if ranks:
+            by_ranks = launch_ranks(ranks, sizes, overrides, outdir)
+            doc = None if by_ranks is None else report(by_ranks)
+        else:
+            result = run_bench(sizes, overrides, outdir, comm)
+            if result is not None and json_only:  # a launch of `bench --ranks`: for the launching process
+                path = Path(json_only)
+                writes.on_rank0(comm, path, writes.write_text, path, json.dumps(result))
+                return ""
+            doc = None if result is None else report({comm.size: result})
+    if doc is None:
+        return None
+    text = table(doc) if comm.rank == 0 else ""  # the per-rank memory is gathered on rank 0 only
+
+    def files():
+        writes.at(outdir, outdir.mkdir, parents=True, exist_ok=True)
+        for name, content in (("bench.json", json.dumps(doc, indent=2)), ("bench.md", text)):
+            writes.at(outdir / name, writes.write_text, outdir / name, content + "\n")
+
+    writes.on_rank0(comm, outdir, files)  # every rank may read bench.json once the command returns
+    return text

@@ -64,8 +64,12 @@ def richardson(values: list[float], ratio: float) -> dict:
     return out
 
 
-def refined_configs(cfg: dict, study: str, levels: int, time_factor: float, mesh_factor: float,
-                    coarsen: bool = False):
+TIME_FACTOR = 4.0  # adaptive steps: the time tolerance's ratio between levels (steps ~ sqrt(tolerance))
+MESH_FACTOR = 2.0  # the element size's ratio between levels
+
+
+def refined_configs(cfg: dict, study: str, levels: int, time_factor: float = TIME_FACTOR,
+                    mesh_factor: float = MESH_FACTOR, coarsen: bool = False):
     """(label, parameter value, config) per level, level 0 = the base config; level k is refined k
     times, or coarsened k times with ``coarsen`` (cheaper: the base is then the finest level)."""
     out = []
@@ -96,6 +100,20 @@ def refined_configs(cfg: dict, study: str, levels: int, time_factor: float, mesh
     return out
 
 
+def check(cfg: dict, levels: int, studies, coarsen: bool) -> None:
+    """``converge``'s own input: the level count, the stability test on, every level's mesh within the size
+    limit (a ConfigError naming the key otherwise)."""
+    from app.workflows import preflight
+
+    if not 2 <= levels <= 6:
+        raise config.ConfigError("--levels", f"= {levels} is out of range; allowed: 2..6")
+    if not cfg["stability"]["enabled"]:
+        raise config.ConfigError("stability.enabled", "must be true for a convergence study of g_c")
+    for study in studies:
+        for label, _, c in refined_configs(cfg, study, levels, coarsen=coarsen):
+            preflight.mesh_size(c, False, f"converge level {label}")
+
+
 def _level(c: dict, d: Path, comm, label: str, force: bool, log) -> dict:
     """One level's summary: kept from an earlier converge (finished, the same config), resumed from its
     checkpoint, or run."""
@@ -116,8 +134,8 @@ def _level(c: dict, d: Path, comm, label: str, force: bool, log) -> dict:
     return simulate(c, d, comm)
 
 
-def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"), time_factor: float = 4.0,
-             mesh_factor: float = 2.0, coarsen: bool = False, force: bool = False) -> dict:
+def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"), time_factor: float = TIME_FACTOR,
+             mesh_factor: float = MESH_FACTOR, coarsen: bool = False, force: bool = False) -> dict:
     """Run the refinement studies; write convergence.csv/.json/.md/.png; return the report."""
     from app.io import writes
 

@@ -31,11 +31,11 @@ def companion_config(cfg: dict, study: str) -> tuple[dict, str]:
     from app.workflows.convergence import refined_configs
 
     try:
-        return refined_configs(cfg, study, 2, 4.0, 2.0, coarsen=True)[1][2], "coarsened"
+        return refined_configs(cfg, study, 2, coarsen=True)[1][2], "coarsened"
     except config.ConfigError:
         if study != "mesh":
             raise
-        return refined_configs(cfg, study, 2, 4.0, 2.0)[1][2], "refined"
+        return refined_configs(cfg, study, 2)[1][2], "refined"
 
 
 def companion_error(g: float, g_companion: float, order: float, direction: str) -> float:

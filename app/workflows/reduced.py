@@ -13,8 +13,7 @@ import json
 import time
 from pathlib import Path
 
-from app import config, logging_setup
-from app.reduced.section import Section
+from app import config, factory, logging_setup
 from app.reduced.solve import Estimate, Interrupted, Settings
 from app.reduced.transient import Resolution, TransientFailed
 
@@ -86,9 +85,9 @@ def compute(cfg: dict, stop=None) -> dict:
 
     st = settings(cfg)
     t0 = time.perf_counter()
-    est = converged(Section.from_config(cfg), st, stop=stop)
+    est = converged(factory.section(cfg), st, stop=stop)
     block = summarize(est, st, time.perf_counter() - t0)
-    section = Section.from_config(cfg)
+    section = factory.section(cfg)
     block["mu_bar"] = section.loading.mu_bar(block["time"]) if block["time"] is not None else None
     curve = est.levels[0].curve
     early = sorted(curve.modes.values(), key=lambda c: c.time)[:ISOMODES]
@@ -216,3 +215,26 @@ def _write_history(path: Path, est: Estimate) -> None:
         for s in est.levels[0].steps:
             w.writerow([f"{s.t:.10g}", f"{s.mu_bar:.10g}", f"{1e3 * s.growth:.10g}", f"{s.lam_x:.10g}"])
 
+
+def command(cfg: dict, outdir: Path, comm) -> int:
+    """``hydrobuckle reduced``: the exit code (0; 1 when the 1D transient failed, summary.json saying so; the
+    code of a signal, agreed by every rank). A 1D problem: rank 0 computes, the others wait."""
+    from app import interrupt
+
+    log = logging_setup.get()
+    code = 0
+    with interrupt.Watch(comm):
+        if comm.rank == 0:
+            try:
+                summary = run(cfg, outdir, stop=lambda: interrupt._received != 0)
+                log.info("hydrobuckle: result: " + describe(summary["reduced"]) + f" ({outdir}, "
+                         f"{summary['reduced']['seconds']:.1f} s)")
+            except TransientFailed as err:
+                write_failure(outdir, cfg, str(err))
+                log.error(f"hydrobuckle: the 1D transient failed: {err}; summary.json says so")
+                code = 1
+            except Interrupted as err:
+                log.error(f"hydrobuckle: interrupted ({err}): {outdir} has no summary.json")
+        code = comm.bcast(code, root=0)
+        interrupt.pending(comm)  # the exit code of a signal (130 / 143), agreed by every rank
+    return code

@@ -13,6 +13,18 @@ from app import config
 
 COMPLETE = ("buckled", "stable", "equilibrium")  # statuses of a finished run (a rerun keeps it)
 
+#: how each command that cannot take --resume continues instead (its one-line refusal)
+HOW_TO_CONTINUE = {
+    "study": "study continues by itself: rerun the same command (finished cases are kept, an interrupted case "
+             "resumes from its checkpoint; --force runs every case anew)",
+    "sweep": "sweep continues by itself: rerun the same command (finished cases are kept, an interrupted case "
+             "resumes from its checkpoint; --force runs every case anew)",
+    "converge": "converge continues by itself: rerun the same command (finished levels are kept, an interrupted "
+                "level resumes from its checkpoint; --force runs every level anew)",
+    "bench": "bench cannot be resumed: it times whole runs, and an interrupted bench writes no bench.json; "
+             "rerun the same command",
+}
+
 
 def finished(cfg: dict, outdir, solver: str = "2d") -> dict | None:
     """The summary of a finished run of exactly ``cfg`` in ``outdir`` (its config.toml equal to ``cfg``,

@@ -14,11 +14,13 @@ from app import interrupt, logging_setup, timing
 from app.io import checkpoint
 from app.io.output import OutputSettings, ResultWriter, versions
 from app.io.writes import ResultWriteError
+from app import factory
 from app.model.problem import Problem
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
 from app.onset.branching import reference_length
-from app.onset.wrinkles import SurfaceProfiles, surface_profile
+from app.onset.contact import ModelLimits
+from app.model.surface import SurfaceProfiles, surface_profile
 from app.solvers.stepping import ModelLimit, StepFailure, StepRecord, TimeSettings, TimeStepper
 
 ASSUMPTIONS = (
@@ -81,8 +83,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     watch = interrupt.Watch(comm).__enter__()  # SIGINT/SIGTERM: recorded, acted on between steps
     with timing.timed("setup"):
         if problem is None:
-            problem = Problem.from_config(cfg, comm)
-        stepper = TimeStepper(problem, settings.time, settings.solver, log=log.info)
+            problem = factory.problem(cfg, comm)
+        stepper = TimeStepper(problem, settings.time, settings.solver, log=log.info, limits=ModelLimits)
         tracker = onset_tracker(problem, stepper, settings.stability, log=log.info, detail=detail,
                                 on_first_crossing=lambda crossing: writer.write_mode(problem, crossing),
                                 reference_length=reference_length(cfg))

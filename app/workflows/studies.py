@@ -314,6 +314,28 @@ def _json_default(o):
     return str(o)
 
 
+def outcome(rows: list[dict], outdir: Path) -> tuple[bool, str]:
+    """Whether every case of a study is complete, and the line that says how many and which files it wrote."""
+    done = sum(r["status"] in COMPLETE for r in rows)
+    files = [f for f in ("study.csv", "study.png", "modes.png", "isomodes.png") if (Path(outdir) / f).is_file()]
+    return done == len(rows), f"study {outdir}: {done}/{len(rows)} cases complete; {', '.join(files)}"
+
+
+def listing() -> str:
+    """``study --list``: each study's name, description, key and default values."""
+    return "\n".join(f"{name:26s} {spec.description}\n{'':26s} {spec.param} = "
+                     + ", ".join(f"{v:g}" for v in spec.values) for name, spec in STUDIES.items())
+
+
+def sweep_cases(path, param: str, values: list, outdir: Path, overrides: list[str], isomodes: bool = False,
+                error_estimate: bool = False) -> list[Case]:
+    """``hydrobuckle sweep``: one case per value of the dotted key ``param`` over the config file at ``path``
+    (its own tables: each case is resolved with the value in place)."""
+    user = config.read(path)
+    config.set_dotted(config.defaults(), param, values[0])  # the key must exist
+    return build_cases(user, param, values, outdir, overrides, isomodes=isomodes, error_estimate=error_estimate)
+
+
 def study_cases(name: str, outdir: Path, values: list | None, overrides: list[str],
                 error_estimate: bool = False, isomodes: bool | None = None) -> tuple[StudySpec, list[Case]]:
     spec = STUDIES[name]

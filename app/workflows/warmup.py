@@ -52,14 +52,14 @@ def warmup(comm, log=print) -> float:
         simulate(cfg, Path(tmp) / label.split()[0], comm, progress=False)
         log(f"warmup: {label} forms ready ({time.perf_counter() - t:.1f} s)")
     if comm.rank == 0:  # the 1D reduction's forms (the 2D run's counterpart and `hydrobuckle reduced`)
-        from app.reduced.section import Section
+        from app import factory
         from app.reduced.solve import compile_forms
         from app.workflows.reduced import settings
 
         for label, user in (("bilayer", {}), ("tube", {"geometry": {"kind": "tube"}})):
             t = time.perf_counter()
             cfg = config.resolve(user)
-            compile_forms(Section.from_config(cfg), settings(cfg))
+            compile_forms(factory.section(cfg), settings(cfg))
             log(f"warmup: 1D reduction of the {label} forms ready ({time.perf_counter() - t:.1f} s)")
     comm.barrier()
     if comm.rank == 0:

@@ -1,4 +1,8 @@
-"""Wrinkle count of a buckling mode from its surface displacement profile.
+"""The permeable surface's shape: its nodes' displacement, profiles along or around it, the wrinkle amplitude and
+count of a state or a mode (the observables of history.csv, wrinkles.png and the onset's N_c), and the branch's
+recorded profiles.
+
+Wrinkle count of a buckling mode from its surface displacement profile.
 
 Definition (bilayer): N_c is the number of wavelengths of the mode's normal displacement along the
 film surface, to half a wave (N = 0.5, 1, 1.5, ...), i.e. k/2 where k is the number of half-waves
@@ -11,7 +15,6 @@ scan tolerates end effects and noise that shift or blur a discrete spectrum.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,38 +59,6 @@ def dominant_half_waves(x: np.ndarray, y: np.ndarray, length: float, max_half_wa
 def wrinkle_count(x: np.ndarray, y: np.ndarray, length: float, **kw) -> float:
     """N = (number of half-waves)/2, to half a wave."""
     return 0.5 * round(dominant_half_waves(x, y, length, **kw))
-
-
-def band_vertex(counts, eigenvalues, step: float = 0.5) -> float | None:
-    """Wrinkle count at the minimum of the dispersion curve lambda(N) sampled by several modes.
-
-    Near a wrinkling onset the eigenvalues of neighbouring wrinkle counts are nearly equal, so which
-    of them crosses zero first is decided by tiny details. Around the count n0 with the lowest
-    eigenvalue (equal lowest eigenvalues: the smaller count), a parabola through the lowest
-    eigenvalue of each count within n0 +- 2 steps (at least one on each side) locates the minimum of
-    lambda(N). The result is the count (a multiple of ``step``) nearest to the parabola's vertex,
-    with the vertex kept within one step of n0, so the answer is n0 or one of its neighbours. A
-    vertex halfway between two counts (to 1e-9 of a step, e.g. data mirrored about that point)
-    goes to the one nearer n0, i.e. to n0 itself, whatever the parity of n0 / step. Far-away counts
-    (global modes, the other branch of the dispersion curve) are left out of the fit.
-    None if no such fit exists."""
-    lowest: dict[float, float] = {}
-    for n, lam in zip(counts, eigenvalues):
-        if n is None or not np.isfinite(lam) or n <= 0:
-            continue
-        lowest[n] = min(lam, lowest.get(n, np.inf))
-    if not lowest:
-        return None
-    n0 = min(lowest, key=lambda n: (lowest[n], n))
-    near = sorted(n for n in lowest if abs(n - n0) <= 2 * step + 1e-9)
-    if len(near) < 3 or min(near) >= n0 or max(near) <= n0:
-        return None
-    a, b, _ = np.polyfit(near, [lowest[n] for n in near], 2)
-    if a <= 0:
-        return None
-    offset = min(max(-b / (2 * a) - n0, -step), step) / step  # vertex - n0 in steps, in [-1, 1]
-    k = math.floor(abs(offset) + 0.5 - 1e-9)  # nearest whole step; a tie rounds towards n0
-    return n0 + math.copysign(k * step, offset)
 
 
 def circumferential_wavenumber(theta: np.ndarray, r: np.ndarray, weights: np.ndarray | None = None) -> int:

@@ -1,0 +1,130 @@
+"""The stability criteria: which perturbations count when a state's stability is tested
+(``stability.criterion``; docs/validation.md, "Which instabilities count").
+
+A criterion is one :class:`Criterion` subclass and one registration in :data:`CRITERIA`: its matrix (the form
+from :mod:`app.model.operators`, the linear algebra from :mod:`app.solvers.stability`), whether the Newton
+factor of a step may screen it, whether its mode needs its fluid content added when a branch is followed,
+its parameters (``stability.<key>``, declared once here and put into the config schema from the registry),
+the short-wave check it corresponds to, and its entry in summary.json. Everything that used to compare the
+criterion's name goes through these.
+
+For every tau, negatives(undrained) <= negatives(rate with tau) <= negatives(drained) (K_uu is a principal
+block of K_tau; K_tau decreases with tau): the drained onset comes first.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from app.registry import Registry
+from app.schema import Key, gt, key
+
+# dolfinx, PETSc and SLEPc are imported when a matrix is built, not with the registry (the config schema
+# reads it, and validating a config must not load them)
+
+
+class Criterion:
+    """A stability criterion: subclass, fill in the class attributes and :meth:`operator`, register an
+    instance in :data:`CRITERIA`."""
+
+    name: ClassVar[str] = ""
+    doc: ClassVar[str] = ""  # what it counts, for the schema's documentation of stability.criterion
+    keys: ClassVar[dict[str, Key]] = {}  # its parameters: stability.<name> (every criterion's are in the schema)
+    #: followed branch: the mode is a displacement whose cells' fluid content must change with it
+    #: (app.onset.branching adds the flux of that change where fluid can move)
+    adds_content: ClassVar[bool] = False
+    #: the permeable surface's short-wave check under this criterion (app.onset.surface: drained or undrained)
+    surface: ClassVar[str] = "drained"
+
+    def operator(self, problem, params: dict):
+        """The matrix whose inertia decides stability at the problem's converged state."""
+        raise NotImplementedError
+
+    def analyzer(self, problem, params: dict):
+        """The :class:`app.solvers.stability.StabilityAnalyzer` of :meth:`operator`."""
+        from app.solvers.stability import StabilityAnalyzer
+
+        return StabilityAnalyzer(self.operator(problem, params), problem.comm)
+
+    def newton_may_screen(self, params: dict, dt: float) -> bool:
+        """Whether the Newton factor of a step of size dt (K_dt) has at least this criterion's negative
+        eigenvalues, so that screening with it cannot miss a crossing (app.onset.screening)."""
+        return False
+
+    def summary(self, params: dict) -> dict:
+        """summary.json's ``criterion`` entry: the name and the parameters."""
+        return {"name": self.name, **{k: params[k] for k in self.keys}}
+
+    def surface_label(self) -> str:
+        return self.surface if self.surface == self.name else f"{self.surface} (the short-wave limit of {self.name})"
+
+
+class Drained(Criterion):
+    """The fluid free to redistribute: the stored energy's Hessian with each cell's content eliminated. A
+    gradient flow leaves a state exactly when this test fails; the limit tau -> infinity of K_tau. Without
+    diffusion it is the undrained test."""
+
+    name = "drained"
+    doc = "drained (fluid may redistribute; any growing mode)"
+    adds_content = True
+
+    def operator(self, problem, params: dict):
+        if not problem.diffusion:  # no fluid motion: drained = undrained
+            return UNDRAINED.operator(problem, params)
+        if problem.permeable_facets() == 0:
+            raise ValueError("stability.criterion = 'drained' needs a permeable boundary (the fluid content of a "
+                             "closed body is conserved); use 'undrained' or 'rate'")
+        from app.model.operators import drained_hessian
+        from app.solvers.stability import DrainedOperator
+
+        return DrainedOperator(drained_hessian(problem), problem.comm)
+
+
+class Undrained(Criterion):
+    """The fluid frozen (tau -> 0): K_uu at fixed content. Biot's surface instability of an incompressible
+    solid. K_uu is a principal block of every K_dt, so the Newton factor may always screen it (interlacing)."""
+
+    name = "undrained"
+    doc = "undrained (fluid frozen)"
+    surface = "undrained"
+
+    def operator(self, problem, params: dict):
+        return _hessian(problem, 1.0, keep=problem.u_dofs)
+
+    def newton_may_screen(self, params: dict, dt: float) -> bool:
+        return True
+
+
+class Rate(Criterion):
+    """K_tau with stability.tau: instabilities that grow faster than about 1/tau (the seed paper's choice
+    when tau is the step). The Newton factor may screen it when dt >= 2 tau (K_dt = K_inf + D/dt <= K_tau;
+    the factor 2 covers the change of the dissipation metric D over a step)."""
+
+    name = "rate"
+    doc = "rate (K with stability.tau)"
+    keys = {"tau": key(float, 1.0e-2, gt(0), "criterion = rate only: step of the dissipation block of K [s]")}
+
+    def operator(self, problem, params: dict):
+        return _hessian(problem, params["tau"])
+
+    def newton_may_screen(self, params: dict, dt: float) -> bool:
+        return dt >= 2.0 * params["tau"]
+
+
+CRITERIA: Registry[Criterion] = Registry("stability criterion")
+DRAINED = CRITERIA.register(Drained())
+UNDRAINED = CRITERIA.register(Undrained())
+CRITERIA.register(Rate())
+DEFAULT = "drained"
+
+
+def _hessian(problem, tau: float, keep=None):
+    from app.model.operators import zero_increment_hessian
+    from app.solvers.stability import HessianOperator
+
+    return HessianOperator(zero_increment_hessian(problem, tau), problem.comm, keep=keep)
+
+
+def rate_matrix(problem, tau: float):
+    """The analyzer of K with the step tau on the free dofs (criterion "rate" with that tau)."""
+    return CRITERIA.get("rate").analyzer(problem, {"tau": tau})

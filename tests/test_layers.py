@@ -1,0 +1,53 @@
+"""The module map of docs/architecture.md as a contract: import-linter's layers contract in pyproject.toml
+(a room imports only rooms below it; the base modules import none of each other; meshes/ knows only gmsh)
+holds for the code, and an upward import added to a copy of the code breaks it."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from conftest import on_rank0
+
+ROOT = Path(__file__).resolve().parents[1]
+LINT = Path(sys.executable).with_name("lint-imports")
+
+
+def _lint(where: Path) -> subprocess.CompletedProcess:
+    assert LINT.is_file(), f"{LINT} is missing: scripts/test.sh installs scripts/test-requirements.txt"
+    env = {**os.environ, "PYTHONPATH": str(where)}  # this tree's app/ and meshes/, not the installed ones
+    return subprocess.run([str(LINT), "--no-cache"], cwd=where, env=env, capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_the_code_keeps_its_layers():
+    done = on_rank0(_lint, ROOT)
+    assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
+    assert "2 kept, 0 broken" in done.stdout, done.stdout[-2000:]
+
+
+def _copy_with(tmp: Path, path: str, line: str) -> Path:
+    for part in ("app", "meshes"):
+        shutil.copytree(ROOT / part, tmp / part, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "pyproject.toml", tmp)
+    target = tmp / path
+    target.write_text(target.read_text() + f"\n\n{line}\n")
+    return tmp
+
+
+def test_an_upward_import_breaks_the_contract(shared_tmp):
+    """The physics importing the command line (model -> cli), and a gmsh builder importing app/."""
+    where = _copy_with(shared_tmp / "up", "app/model/material.py", "from app import cli  # noqa: E402")
+    done = on_rank0(_lint, where)
+    assert done.returncode == 1, done.stdout[-3000:]
+    assert "app.model is not allowed to import app.cli" in done.stdout, done.stdout[-3000:]
+    assert "app.model.material -> app.cli" in done.stdout, done.stdout[-3000:]
+    assert "1 kept, 1 broken" in done.stdout, done.stdout[-2000:]
+
+    where = _copy_with(shared_tmp / "meshes", "meshes/bilayer.py", "import app.schema  # noqa: E402")
+    done = on_rank0(_lint, where)
+    assert done.returncode == 1, done.stdout[-3000:]
+    assert "meshes.bilayer -> app.schema" in done.stdout, done.stdout[-3000:]
