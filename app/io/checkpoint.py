@@ -17,6 +17,11 @@ stopped (docs/reliability.md, "Checkpoint and restart"):
   surface profile of every branch step so far (profiles.npz of the continued run starts with them; they
   are gathered surface arrays sorted along the surface, the same on any number of ranks).
 
+Each object writes and reads its own part of the meta: the stepper its counters and each snapshot's
+scalars (``TimeStepper.counters``, ``Snapshot.scalars``; ``resume_from``, ``snapshot_of``), the tracker
+its count, crossings and screen with snapshots referred to by number (``checkpoint_state``,
+``restore_checkpoint``). This module stores the snapshots' arrays, the keys and the file.
+
 The arrays are stored independently of the mesh partition: displacement dofs keyed by the input node
 index of their vertex, the RTCF flux dofs (one per facet) by their facet's vertex pair. A flux dof's
 sign depends on the facet orientation dolfinx takes from the partition's global vertex numbering, so
@@ -28,7 +33,6 @@ against the stored coordinates.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import os
@@ -258,14 +262,6 @@ def _json_default(o):
     raise TypeError(f"cannot store {type(o).__name__} in a checkpoint")
 
 
-_SNAP_SCALARS = ("dt_prev", "history_valid", "t", "step", "inflow", "dt_next")
-_DROPPED = ("mode", "state", "lo", "hi")  # a crossing's arrays: only needed while it is being located
-
-
-def _crossing_dict(c) -> dict:
-    return {f.name: getattr(c, f.name) for f in dataclasses.fields(c) if f.name not in _DROPPED}
-
-
 class _Sink:
     """Rank 0's zip file; collects the first error instead of raising (the gathers must go on)."""
 
@@ -326,18 +322,7 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, pr
         return len(snaps) - 1
 
     current = ref(stepper.snapshot())
-    tstate = tracker.export_state()
-    tracker_meta = None
-    if tstate is not None:
-        screen = tstate["screen"]
-        tracker_meta = {
-            "count": tstate["count"], "exact_tests": tstate["exact_tests"], "limits": tstate.get("limits", {}),
-            "branch": tstate.get("branch"),
-            "crossings": [_crossing_dict(c) for c in tstate["crossings"]],
-            "screen": {**{k: v for k, v in screen.items() if k not in ("recent", "verified")},
-                       "recent": [ref(s) for s in screen["recent"]],
-                       "verified": ref(screen["verified"]) if screen["verified"] is not None else None},
-        }
+    tracker_meta = tracker.checkpoint_state(ref)  # refers to snapshots by number; None without a tracker
     snap_meta = []
     for s in snaps:
         u, q = layout.mixed_parts(s.state)
@@ -346,7 +331,7 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, pr
                                    ("dQ_prev", "q", layout.q_part(s.dQ_prev))):
             full = layout.gather(kind, owned)
             members[field] = sink.array(full) if rank0 else None
-        snap_meta.append({**{k: getattr(s, k) for k in _SNAP_SCALARS}, **members})
+        snap_meta.append({**s.scalars(), **members})
     size = 0.0
     error = None
     if rank0:
@@ -500,10 +485,9 @@ def check(outdir, cfg: dict, comm) -> Resume:
 
 def restore(resume: Resume, problem, stepper, tracker) -> DofLayout:
     """Put the checkpoint's state into a freshly built problem, stepper and tracker (collective, on any
-    number of ranks). Returns the layout (for later checkpoints)."""
-    from app.onset.crossing import Crossing
-    from app.solvers.stepping import Snapshot
-
+    number of ranks): the stored snapshots are rebuilt on this layout, then the stepper and the tracker
+    take their own parts of the meta (``resume_from``, ``restore_checkpoint``). Returns the layout (for
+    later checkpoints)."""
     layout = DofLayout(problem)
     comm, meta = layout.comm, resume.meta
     z = np.load(resume.path, allow_pickle=False) if comm.rank == 0 else None
@@ -524,29 +508,15 @@ def restore(resume: Resume, problem, stepper, tracker) -> DofLayout:
                 cache[name] = layout.scatter(kind, z[name] if z is not None else None)
             return cache[name]
 
-        snaps = []
-        for s in meta["snapshots"]:
-            state = layout.mixed(local(s["state_u"], "u"), local(s["state_q"], "q"))
-            snaps.append(Snapshot(state, local(s["rate_u"], "u").ravel().copy(),
-                                  local(s["dQ_prev"], "q") * layout.q_sign,
-                                  *(s[k] for k in _SNAP_SCALARS)))
+        snaps = [stepper.snapshot_of(layout.mixed(local(s["state_u"], "u"), local(s["state_q"], "q")),
+                                     local(s["rate_u"], "u").ravel().copy(), local(s["dQ_prev"], "q") * layout.q_sign,
+                                     s) for s in meta["snapshots"]]
     finally:
         if z is not None:
             z.close()
-    current = snaps[meta["current"]]
-    stepper.restore(current)
-    stepper.set_counters(meta["stepper"])
-    w = problem.w.x.array  # the last step's (u, dQ): only the flux output reads it before the next step
-    w[:] = 0.0
-    w[problem.u_dofs] = current.state[problem.u_dofs]
-    w[problem.q_dofs] = current.dQ_prev
-    t = meta["tracker"]
-    if t is not None:
-        crossings = [Crossing(**{**c, "bracket": tuple(c["bracket"])}) for c in t["crossings"]]
-        screen = {**t["screen"], "recent": [snaps[i] for i in t["screen"]["recent"]],
-                  "verified": snaps[t["screen"]["verified"]] if t["screen"]["verified"] is not None else None}
-        tracker.import_state({"count": t["count"], "crossings": crossings, "exact_tests": t["exact_tests"],
-                              "screen": screen, "limits": t.get("limits", {}), "branch": t.get("branch")})
+    stepper.resume_from(snaps[meta["current"]], meta["stepper"])
+    if meta["tracker"] is not None:
+        tracker.restore_checkpoint(meta["tracker"], snaps)
     comm.barrier()
     return layout
 

@@ -252,7 +252,7 @@ class ResultWriter:
         except ResultWriteError as err:
             self._record(err)
         polys = _gather_cells(problem, base.x.array, mode.x.array)
-        from app.model.surface import along_profile, around_profile, boundary_displacement
+        from app.model.surface import boundary_displacement, shape_of
 
         groups = problem.geo.facets_with_role("permeable")
         coords, disp = boundary_displacement(problem, crossing.mode, groups)
@@ -264,14 +264,9 @@ class ResultWriter:
                 header="x,y,mode_ux,mode_uy,state_ux,state_uy", comments=""))
         except ResultWriteError as err:
             self._record(err)
-        if problem.geo.wrinkles == "around":
-            _, radial, _, theta = around_profile(coords, disp)
-            profile = (np.degrees(theta), radial / (np.abs(radial).max() or 1.0), "angle around the passage [deg]",
-                       "normal mode displacement")
-        else:
-            t, un, _ = along_profile(coords, disp)
-            profile = (t - t.min(), un / (np.abs(un).max() or 1.0), "position along the surface [mm]",
-                       "normal mode displacement")
+        shape = shape_of(problem)
+        position, normal = shape.plotted(coords, disp)
+        profile = (position, normal / (np.abs(normal).max() or 1.0), shape.position_label, "normal mode displacement")
         if self.settings.plot:
             from app.io.plots import mode_plot
 

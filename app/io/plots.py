@@ -46,7 +46,9 @@ def mode_plot(polys, profile, geo, crossing, path) -> None:
 
     X, U, M, layer = polys
     x_prof, y_prof, xlabel, ylabel = profile
-    around = geo.wrinkles == "around"
+    from app.model.surface import SHAPES
+
+    around = SHAPES.get(geo.wrinkles).closed
     size = np.ptp(X[:, :, 0]) if not around else max(np.ptp(X[:, :, 0]), np.ptp(X[:, :, 1]))
     keep = np.ones(len(X), dtype=bool)
     if geo.plot_band is not None:

@@ -19,6 +19,7 @@ from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.loading import BoundaryConditions, Loading
 from app.model.material import Material
 from app.model.potential import CompiledForms, build, fields_class
+from app.model.surface import GROWTH
 
 
 @dataclass(frozen=True)
@@ -151,29 +152,13 @@ class Problem:
         n = ufl.FacetNormal(self.domain)
         one = compat.Constant(self.domain, compat.ScalarType(1.0))
         self.surface_length = compat.assemble_scalar(compat.form(one * self.ds_permeable), self.comm)
-        self._growth_form = compat.form(ufl.dot(u_n, n) * self.ds_permeable)
         self._fluid_form = compat.form(fluid_content(self.mat.s0, Q_n) * self.dx)
         self._influx_form = compat.form(-ufl.dot(dQ, n) * self.ds_permeable)
         # the stored energy of the converged state (the incremental potential without dissipation and load)
         F_n = deformation_gradient(u_n)
         bulk, constraint = self.mat.law.free_energy(F_n, fluid_content(self.mat.s0, Q_n), self.mat)
         self._stored_form = compat.form(bulk * self.dx + constraint * self.dx_coupling)
-        self._growth_dof = None
-        if self.geo.growth == "vertex":
-            self._growth_dof = self._locate_point_dofs(self.geo.growth_point)
-
-    def _locate_point_dofs(self, point) -> np.ndarray | None:
-        """Indices in W of (u_x, u_y) at the owned mesh node at ``point`` (None on other ranks)."""
-        X = self.V_u.tabulate_dof_coordinates()[:, :2]
-        n_owned = self.V_u.dofmap.index_map.size_local
-        d = np.linalg.norm(X[:n_owned] - np.asarray(point), axis=1)
-        i = int(np.argmin(d)) if n_owned else -1
-        best = self.comm.allreduce(float(d[i]) if n_owned else np.inf, op=_mpi_min())
-        if best > 1e-8:
-            raise RuntimeError(f"no mesh node at the growth point {point} (nearest {best:.3g} mm away)")
-        if n_owned and d[i] == best:
-            return self.u_dofs[[2 * i, 2 * i + 1]]
-        return None
+        self._growth = GROWTH.get(self.geo.growth).bind(self)  # the measure the geometry kind names
 
     # --- time-dependent data ---------------------------------------------------------------
 
@@ -187,22 +172,10 @@ class Problem:
     # --- observables of the converged state ------------------------------------------------
 
     def growth(self) -> float:
-        """The paper's growth [mm]: mean displacement of the permeable surface along the body's outward
-        normal; for tubes the mean inward radial displacement of the passage's nodes (arc-length
-        weighted); or the inward displacement of one point (elliptic passage: minor-axis vertex)."""
-        if self.geo.growth == "mean_radial":
-            from app.model.surface import around_profile, boundary_displacement
-
-            coords, disp = boundary_displacement(self, self.state.x.array, self.geo.facets_with_role("permeable"))
-            _, radial, weights, _ = around_profile(coords, disp, centre=(0.0, 0.0))
-            return float(-np.sum(weights * radial) / np.sum(weights))
-        if self.geo.growth == "vertex":
-            local = 0.0
-            if self._growth_dof is not None:
-                u = self.state.x.array[self._growth_dof]
-                local = float(np.dot(u, self.geo.growth_direction))
-            return self.comm.allreduce(local)
-        return compat.assemble_scalar(self._growth_form, self.comm) / self.surface_length
+        """The growth [mm] of the converged state, as the geometry kind measures it
+        (:class:`app.model.surface.GrowthMeasure`: the paper's mean normal displacement of the permeable
+        surface; a tube's mean inward radial displacement; one vertex's inward displacement)."""
+        return self._growth()
 
     def stored_energy(self) -> float:
         """Stored (free) energy of the converged state [N mm / mm depth]: psi integrated over the reference."""
@@ -236,9 +209,3 @@ class Problem:
 
     def cells(self) -> int:
         return compat.num_global_cells(self.domain)
-
-
-def _mpi_min():
-    from mpi4py import MPI
-
-    return MPI.MIN

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from app import compat
+from app.registry import Registry
 
 
 def dominant_half_waves(x: np.ndarray, y: np.ndarray, length: float, max_half_waves: int | None = None,
@@ -121,16 +122,155 @@ def around_profile(coords: np.ndarray, disp: np.ndarray, centre=None):
     return 2 * np.pi * s / total, radial, weights, theta[order]
 
 
+class SurfaceShape:
+    """How the permeable surface's shape is measured: an open, nearly straight surface (``along``, the bilayer)
+    or a closed one (``around``, a tube's passage). A geometry kind names its shape
+    (``GeometrySetup.wrinkles``); the counts, profiles, contact check, plots and bisection ask this object."""
+
+    name = ""
+    closed = False
+    count_step = 0.5  # the resolution of a wrinkle count (half a wave along an open surface)
+    position_label = "position along the surface [mm]"
+
+    def order(self, coords: np.ndarray) -> np.ndarray:
+        """The order of the surface's nodes along it."""
+        centre, tangent = surface_tangent(coords)
+        return np.argsort((coords - centre) @ tangent)
+
+    def mode_count(self, coords: np.ndarray, disp: np.ndarray) -> float:
+        t, un, length = along_profile(coords, disp)
+        return wrinkle_count(t, un, length)
+
+    def detrended(self, coords: np.ndarray, disp: np.ndarray, outward: bool):
+        """(position, normal displacement, weights, basis of its rigid and uniform parts)."""
+        phase, radial, _ = along_profile(coords, disp)
+        if outward and radial.mean() < 0:
+            radial = -radial
+        return phase, radial, np.ones_like(phase), np.stack([np.ones_like(phase), phase], axis=1)
+
+    def count(self, position: np.ndarray, profile: np.ndarray, weights: np.ndarray) -> float:
+        return wrinkle_count(position, profile, float(position.max() - position.min()))
+
+    def plotted(self, coords: np.ndarray, disp: np.ndarray):
+        """(position, normal displacement) for the mode plot."""
+        t, un, _ = along_profile(coords, disp)
+        return t - t.min(), un
+
+
+class ClosedSurface(SurfaceShape):
+    name = "around"
+    closed = True
+    count_step = 1.0  # an integer wavenumber around a closed surface
+    position_label = "angle around the passage [deg]"
+
+    def order(self, coords: np.ndarray) -> np.ndarray:
+        rel = coords - coords.mean(axis=0)
+        return np.argsort(np.arctan2(rel[:, 1], rel[:, 0]))
+
+    def mode_count(self, coords: np.ndarray, disp: np.ndarray) -> float:
+        phase, radial, weights, _ = around_profile(coords, disp)
+        return float(circumferential_wavenumber(phase, radial, weights))
+
+    def detrended(self, coords: np.ndarray, disp: np.ndarray, outward: bool):
+        phase, radial, weights, _ = around_profile(coords, disp)
+        return phase, radial, weights, np.stack([np.ones_like(phase), np.cos(phase), np.sin(phase)], axis=1)
+
+    def count(self, position: np.ndarray, profile: np.ndarray, weights: np.ndarray) -> float:
+        return float(circumferential_wavenumber(position, profile, weights))
+
+    def plotted(self, coords: np.ndarray, disp: np.ndarray):
+        _, radial, _, theta = around_profile(coords, disp)
+        return np.degrees(theta), radial
+
+
+class OpenSurface(SurfaceShape):
+    name = "along"
+
+
+SHAPES: Registry[SurfaceShape] = Registry("surface shape")
+SHAPES.register(OpenSurface())
+SHAPES.register(ClosedSurface())
+
+
+def shape_of(problem) -> SurfaceShape:
+    """The shape measure the problem's geometry kind named."""
+    return SHAPES.get(problem.geo.wrinkles)
+
+
+class GrowthMeasure:
+    """What the run reports as the growth [mm] (``GeometrySetup.growth`` names it): ``bind(problem)`` returns
+    the function of the converged state that measures it (collective)."""
+
+    name = ""
+
+    def bind(self, problem):
+        raise NotImplementedError
+
+
+class MeanNormal(GrowthMeasure):
+    """The paper's growth: the mean displacement of the permeable surface along the body's outward normal."""
+
+    name = "mean_normal"
+
+    def bind(self, problem):
+        import ufl
+
+        u_n, _ = ufl.split(problem.state)
+        form = compat.form(ufl.dot(u_n, ufl.FacetNormal(problem.domain)) * problem.ds_permeable)
+        return lambda: compat.assemble_scalar(form, problem.comm) / problem.surface_length
+
+
+class MeanRadial(GrowthMeasure):
+    """A tube: the mean inward radial displacement of the passage's nodes about the axis (arc-length weighted)."""
+
+    name = "mean_radial"
+
+    def bind(self, problem):
+        def growth() -> float:
+            coords, disp = boundary_displacement(problem, problem.state.x.array,
+                                                 problem.geo.facets_with_role("permeable"))
+            _, radial, weights, _ = around_profile(coords, disp, centre=(0.0, 0.0))
+            return float(-np.sum(weights * radial) / np.sum(weights))
+
+        return growth
+
+
+class AtVertex(GrowthMeasure):
+    """The inward displacement of one node (``GeometrySetup.growth_point`` along ``growth_direction``): the
+    elliptic passage's minor-axis vertex."""
+
+    name = "vertex"
+
+    def bind(self, problem):
+        from mpi4py import MPI
+
+        geo, comm = problem.geo, problem.comm
+        X = problem.V_u.tabulate_dof_coordinates()[:, :2]
+        n_owned = problem.V_u.dofmap.index_map.size_local
+        d = np.linalg.norm(X[:n_owned] - np.asarray(geo.growth_point), axis=1)
+        i = int(np.argmin(d)) if n_owned else -1
+        best = comm.allreduce(float(d[i]) if n_owned else np.inf, op=MPI.MIN)
+        if best > 1e-8:
+            raise RuntimeError(f"no mesh node at the growth point {geo.growth_point} (nearest {best:.3g} mm away)")
+        dofs = problem.u_dofs[[2 * i, 2 * i + 1]] if n_owned and d[i] == best else None  # (u_x, u_y) in W
+
+        def growth() -> float:
+            local = float(np.dot(problem.state.x.array[dofs], geo.growth_direction)) if dofs is not None else 0.0
+            return comm.allreduce(local)
+
+        return growth
+
+
+GROWTH: Registry[GrowthMeasure] = Registry("growth measure")
+for _measure in (MeanNormal(), MeanRadial(), AtVertex()):
+    GROWTH.register(_measure)
+
+
 def mode_wrinkle_count(problem, mode: np.ndarray) -> float:
     """Wrinkle count of a mode on the permeable surface: half-waves/2 along an open surface (bilayer),
     integer wavenumber around a closed one (tube)."""
-    groups = problem.geo.facets_with_role("permeable")
-    coords, disp = boundary_displacement(problem, mode, groups)
-    if problem.geo.wrinkles == "around":
-        phase, radial, weights, _ = around_profile(coords, disp)
-        return float(circumferential_wavenumber(phase, radial, weights))
-    t, un, length = along_profile(coords, disp)
-    return wrinkle_count(t, un, length)
+    coords, disp = boundary_displacement(problem, mode, problem.geo.facets_with_role("permeable"))
+    return shape_of(problem).mode_count(coords, disp)
 
 
 # --- the shape of a state's surface (history columns amplitude_mm and wrinkle_count) ------------------
@@ -147,20 +287,11 @@ def surface_profile(problem, array: np.ndarray, outward: bool = True):
     phase 0..2 pi, the radial displacement minus its weighted mean and its n = 1 Fourier part (a uniform
     swelling and a rigid translation), with the arc-length quadrature weights."""
     coords, disp = boundary_displacement(problem, array, problem.geo.facets_with_role("permeable"))
-    if problem.geo.wrinkles == "around":
-        phase, radial, weights, _ = around_profile(coords, disp)
-        basis = np.stack([np.ones_like(phase), np.cos(phase), np.sin(phase)], axis=1)
-        closed = True
-    else:
-        phase, radial, _ = along_profile(coords, disp)
-        if outward and radial.mean() < 0:
-            radial = -radial
-        weights = np.ones_like(phase)
-        basis = np.stack([np.ones_like(phase), phase], axis=1)
-        closed = False
+    shape = shape_of(problem)
+    phase, radial, weights, basis = shape.detrended(coords, disp, outward)
     sw = np.sqrt(weights)[:, None]
     coef = np.linalg.lstsq(basis * sw, radial * sw[:, 0], rcond=None)[0]
-    return phase, radial - basis @ coef, weights, closed
+    return phase, radial - basis @ coef, weights, shape.closed
 
 
 def surface_shape(problem, array: np.ndarray) -> tuple[float, float]:
@@ -174,9 +305,7 @@ def surface_shape(problem, array: np.ndarray) -> tuple[float, float]:
     amplitude = 0.5 * float(prof.max() - prof.min())
     if amplitude <= SHAPE_FLOOR * problem.surface_length:
         return amplitude, 0.0
-    if closed:
-        return amplitude, float(circumferential_wavenumber(pos, prof, weights))
-    return amplitude, wrinkle_count(pos, prof, float(pos.max() - pos.min()))
+    return amplitude, shape_of(problem).count(pos, prof, weights)
 
 
 @dataclass

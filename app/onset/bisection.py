@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from app.model.surface import mode_wrinkle_count
+from app.model.surface import mode_wrinkle_count, shape_of
 from app.onset.crossing import Crossing
 
 BAND_MODES = 8  # eigenpairs sampled at the unstable end to locate the minimum of lambda(N)
@@ -68,8 +68,8 @@ class Bisection:
         counts = [mode_wrinkle_count(p, e.vector) for e in pairs_hi]
         modes = [{"eigenvalue": e.value, "wrinkle_count": n} for e, n in zip(pairs_hi, counts)][:n_modes]
         first = counts[min(base_count, len(counts) - 1)]
-        step = 1.0 if p.geo.wrinkles == "around" else 0.5
-        vertex = band_vertex(counts[base_count:], [e.value for e in pairs_hi[base_count:]], step=step)
+        vertex = band_vertex(counts[base_count:], [e.value for e in pairs_hi[base_count:]],
+                             step=shape_of(p).count_step)
         return Crossing(
             time=t_c, growth_mm=g_c, applied_strain=p.loading.applied_strain(t_c), mu_bar=p.loading.mu_bar(t_c),
             wrinkle_count=vertex if vertex is not None else first, first_mode_wrinkle_count=first,

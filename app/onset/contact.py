@@ -17,7 +17,8 @@ from mpi4py import MPI
 
 from app import compat
 from app.model.kinematics import deformation_gradient
-from app.model.surface import boundary_displacement, surface_tangent
+from app.model.surface import boundary_displacement, shape_of
+from app.solvers.stepping import ModelLimit
 
 
 @dataclass
@@ -58,16 +59,10 @@ def _segments_cross(p: np.ndarray, closed: bool) -> tuple[int, int] | None:
 def surface_contact(problem, array: np.ndarray) -> Limit | None:
     """Whether the deformed permeable surface of ``array`` intersects itself (same verdict on every rank)."""
     coords, disp = boundary_displacement(problem, array, problem.geo.facets_with_role("permeable"))
-    if problem.geo.wrinkles == "around":
-        rel = coords - coords.mean(axis=0)
-        order = np.argsort(np.arctan2(rel[:, 1], rel[:, 0]))
-        closed = True
-    else:
-        centre, tangent = surface_tangent(coords)
-        order = np.argsort((coords - centre) @ tangent)
-        closed = False
+    shape = shape_of(problem)
+    order = shape.order(coords)
     x = (coords + disp)[order]
-    pair = _segments_cross(x, closed)
+    pair = _segments_cross(x, shape.closed)
     if pair is None:
         return None
     where = tuple(float(v) for v in coords[order][pair[0]])
@@ -105,11 +100,49 @@ class InversionCheck:
 
 
 class ModelLimits:
-    """Both checks of an array (a converged state or a failed step's last iterate)."""
+    """Where a followed branch ends: both checks of an array (a converged state or a failed step's last
+    iterate), and the rule for failed attempts. The :class:`~app.solvers.stepping.TimeStepper` builds one
+    when it starts to follow minimizers and tells it of every step (``new_step``), failed attempt
+    (``failed_attempt``), cut-back below dt_min (``out_of_steps``) and accepted state (``accepted``); it
+    raises :class:`~app.solvers.stepping.ModelLimit`, which ends the run with the limit's status.
+
+    One failed attempt whose last iterate folds or inverts may be an overshoot that a shorter step avoids;
+    when a second attempt of the same step does too, the branch itself runs into the limit."""
 
     def __init__(self, problem):
         self.p = problem
         self.inversion = InversionCheck(problem)
+        self._folded: Limit | None = None  # the limit a failed attempt of the current step reached
 
     def __call__(self, array: np.ndarray) -> Limit | None:
         return self.inversion(array) or surface_contact(self.p, array)
+
+    def _of(self, array: np.ndarray) -> Limit | None:
+        if not np.all(np.isfinite(array[self.p.u_dofs])):
+            return None
+        return self(array)
+
+    def new_step(self) -> None:
+        self._folded = None
+
+    def failed_attempt(self, array: np.ndarray, t_try: float, t: float) -> Limit | None:
+        """The limit a failed attempt's last iterate reaches (for the log line), or None; ModelLimit when an
+        earlier attempt of this step reached one too."""
+        limit = self._of(array)
+        if limit is not None:
+            if self._folded is not None:
+                raise ModelLimit(limit, t_try, accepted=t)
+            self._folded = limit
+        return limit
+
+    def out_of_steps(self, t_try: float, t: float) -> None:
+        """No smaller step is left: the limit a failed attempt reached ends the run (else the caller's
+        failure)."""
+        if self._folded is not None:
+            raise ModelLimit(self._folded, t_try, accepted=t)
+
+    def accepted(self, array: np.ndarray, t: float) -> None:
+        """ModelLimit if the accepted state ``array`` (its displacement dofs) reaches a limit."""
+        limit = self._of(array)
+        if limit is not None:
+            raise ModelLimit(limit, t)

@@ -5,6 +5,7 @@ Produced by :class:`app.onset.bisection.Bisection`, recorded by :class:`app.onse
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,6 +30,17 @@ class Crossing:
     lo: object = None  # stepper snapshots at the bracket ends (for further crossings)
     hi: object = None
     hi_count: int = 0  # negative eigenvalues at the unstable end
+
+    #: the arrays a crossing holds only while it is being located: never in a checkpoint
+    TRANSIENT = ("mode", "state", "lo", "hi")
+
+    def checkpoint_state(self) -> dict:
+        """This crossing in a checkpoint's meta (JSON): every field but :attr:`TRANSIENT`."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in self.TRANSIENT}
+
+    @classmethod
+    def from_checkpoint(cls, state: dict) -> Crossing:
+        return cls(**{**state, "bracket": tuple(state["bracket"])})
 
     def as_dict(self) -> dict:
         return {"time": self.time, "growth_mm": self.growth_mm, "growth_um": 1e3 * self.growth_mm,

@@ -118,6 +118,20 @@ class StabilityScreen:
         return {"recent": list(self.recent), "verified": self.verified, "screened_steps": self.screened_steps,
                 "last_exact": self._last_exact, "false_alarms": self.false_alarms, "late_screens": self.late_screens}
 
+    def checkpoint_state(self, ref) -> dict:
+        """This screen in a checkpoint's meta: the counters, and each remembered snapshot as ``ref(snapshot)``
+        (the checkpoint stores each snapshot's arrays once)."""
+        state = self.export_state()
+        return {**{k: v for k, v in state.items() if k not in ("recent", "verified")},
+                "recent": [ref(s) for s in state["recent"]],
+                "verified": ref(state["verified"]) if state["verified"] is not None else None}
+
+    @staticmethod
+    def from_checkpoint(state: dict, snapshots: list) -> dict:
+        """:meth:`checkpoint_state`'s dict with the snapshots in place of their references."""
+        return {**state, "recent": [snapshots[i] for i in state["recent"]],
+                "verified": snapshots[state["verified"]] if state["verified"] is not None else None}
+
     def import_state(self, state: dict) -> None:
         self.recent.clear()
         self.recent.extend(state["recent"])

@@ -19,6 +19,7 @@ from app.onset.bisection import Bisection
 from app.onset.policy import AfterCrossing, CrossingPolicy
 from app.onset.screening import StabilityScreen
 from app.onset.criteria import CRITERIA, DEFAULT, Criterion
+from app.onset.crossing import Crossing
 
 
 @dataclass(frozen=True)
@@ -266,6 +267,21 @@ class OnsetTracker:
                             "history": [(t, g, m, c.tolist()) for t, g, m, c in self.surface.history]}
                 if self.surface is not None else None}
 
+    def checkpoint_state(self, ref) -> dict:
+        """This tracker in a checkpoint's meta (JSON; snapshots as ``ref(snapshot)``): the negative count, the
+        crossings so far, the screen, the other criteria's verdicts and the branch."""
+        state = self.export_state()
+        return {"count": state["count"], "exact_tests": state["exact_tests"], "limits": state["limits"],
+                "branch": state["branch"], "crossings": [c.checkpoint_state() for c in state["crossings"]],
+                "screen": self.screen.checkpoint_state(ref)}
+
+    def restore_checkpoint(self, state: dict, snapshots: list) -> None:
+        """The state :meth:`checkpoint_state` wrote, with its snapshots restored."""
+        self.import_state({"count": state["count"], "exact_tests": state["exact_tests"],
+                           "crossings": [Crossing.from_checkpoint(c) for c in state["crossings"]],
+                           "screen": StabilityScreen.from_checkpoint(state["screen"], snapshots),
+                           "limits": state.get("limits", {}), "branch": state.get("branch")})
+
     def comm_size_matches(self, state: dict) -> bool:
         return state.get("ranks") == self.problem.comm.size
 
@@ -322,4 +338,10 @@ class Untracked:
         return None
 
     def import_state(self, state) -> None:
+        pass
+
+    def checkpoint_state(self, ref) -> None:
+        return None
+
+    def restore_checkpoint(self, state, snapshots) -> None:
         pass

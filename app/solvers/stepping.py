@@ -16,6 +16,7 @@ cannot know, the history restarts. Below ``time.dt_min`` the run fails with a :c
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 import ufl
@@ -111,6 +112,16 @@ class Snapshot:
     inflow: float
     dt_next: float
 
+    #: the scalars a checkpoint stores with the arrays (in this order)
+    SCALARS: ClassVar[tuple[str, ...]] = ("dt_prev", "history_valid", "t", "step", "inflow", "dt_next")
+
+    def scalars(self) -> dict:
+        return {k: getattr(self, k) for k in self.SCALARS}
+
+    @classmethod
+    def from_parts(cls, state: np.ndarray, rate_u: np.ndarray, dQ_prev: np.ndarray, scalars: dict) -> Snapshot:
+        return cls(state, rate_u, dQ_prev, *(scalars[k] for k in cls.SCALARS))
+
 
 class TimeStepper:
     """Advances a :class:`app.model.problem.Problem` in time."""
@@ -144,8 +155,8 @@ class TimeStepper:
         self._setup_error_form()
         self.minimizing = False  # past an onset with stability.after_onset = "branch": follow_minimizers
         self.energy_rejections = 0  # minimizer solves whose energy ended above the initial guess's
-        # where a followed branch ends: limits(problem) -> a check of an array (app.onset.contact.ModelLimits),
-        # built once minimizing; None: no limits
+        # where a followed branch ends: limits(problem) -> app.onset.contact.ModelLimits (new_step,
+        # failed_attempt, out_of_steps, accepted; raising ModelLimit), built once minimizing; None: no limits
         self._limits_of = limits
         self.limits = None
 
@@ -210,12 +221,28 @@ class TimeStepper:
         return Snapshot(self.p.state.x.array.copy(), self.rate_u.copy(), self.dQ_prev.copy(), self.dt_prev,
                         self.history_valid, self.t, self.step, self.inflow, self.dt_next)
 
+    @staticmethod
+    def snapshot_of(state: np.ndarray, rate_u: np.ndarray, dQ_prev: np.ndarray, scalars: dict) -> Snapshot:
+        """A snapshot from stored parts (a checkpoint's arrays on this layout and its scalars)."""
+        return Snapshot.from_parts(state, rate_u, dQ_prev, scalars)
+
     def restore(self, snap: Snapshot) -> None:
         self.p.state.x.array[:] = snap.state
         self.rate_u[:] = snap.rate_u
         self.dQ_prev[:] = snap.dQ_prev
         self.dt_prev, self.history_valid = snap.dt_prev, snap.history_valid
         self.t, self.step, self.inflow, self.dt_next = snap.t, snap.step, snap.inflow, snap.dt_next
+
+    def resume_from(self, snap: Snapshot, counters: dict) -> None:
+        """Continue from a checkpoint's current snapshot and :meth:`counters`; the unknown holds the last
+        step's (u, dQ), which only the flux output reads before the next step."""
+        self.restore(snap)
+        self.set_counters(counters)
+        p = self.p
+        w = p.w.x.array
+        w[:] = 0.0
+        w[p.u_dofs] = snap.state[p.u_dofs]
+        w[p.q_dofs] = snap.dQ_prev
 
     def counters(self) -> dict:
         """What a checkpoint needs besides a :class:`Snapshot` to continue identically
@@ -283,20 +310,16 @@ class TimeStepper:
         control = self.control
         dt = control.first_try(self.dt_next)
         last_reason, diagnosed, failures = None, False, 0
-        folded = None  # on the branch: the limit a failed attempt's last iterate reached
+        limits = self.limits if self.minimizing else None  # on a branch: where it ends (app.onset.contact)
+        if limits is not None:
+            limits.new_step()
         while True:
             dt = self._clip(dt, until)
             res, err = self.attempt(dt)
             if not res.converged:
                 self.failed_solves += 1
                 failures += 1
-                limit = self._limit_of(self.p.w.x.array) if self.minimizing else None
-                if limit is not None:
-                    # one iterate that folds or inverts may be an overshoot a shorter step avoids; a second
-                    # attempt's as well: the branch itself runs into the limit
-                    if folded is not None:
-                        raise ModelLimit(limit, self.t + dt, accepted=self.t)
-                    folded = limit
+                limit = limits.failed_attempt(self.p.w.x.array, self.t + dt, self.t) if limits is not None else None
                 if res.reason == last_reason and not diagnosed:
                     diagnosed = True
                     self._diagnose(dt, res.reason, failures)
@@ -307,8 +330,8 @@ class TimeStepper:
                          + (f" (its last iterate: {limit.status} near ({limit.where[0]:.4g}, {limit.where[1]:.4g}) mm)"
                             if limit is not None else ""))
                 if new_dt < control.dt_min:
-                    if folded is not None:
-                        raise ModelLimit(folded, self.t + dt, accepted=self.t)
+                    if limits is not None:
+                        limits.out_of_steps(self.t + dt, self.t)
                     raise StepFailure(f"Newton failed to converge at t = {self.t:.6g} s even with "
                                       f"dt = {dt:.3g} s (time.dt_min = {control.dt_min:g} s); "
                                       f"last SNES reason {res.reason}")
@@ -321,18 +344,10 @@ class TimeStepper:
             break
         return self._accept(dt, res.iterations, err)
 
-    def _limit_of(self, array: np.ndarray):
-        """On the branch: the :class:`app.onset.contact.Limit` ``array`` (a state or a failed step's last
-        iterate) reaches, an inverted cell or a self-intersecting surface, else None."""
-        if self.limits is None or not np.all(np.isfinite(array[self.p.u_dofs])):
-            return None
-        return self.limits(array)
-
     def _check_limits(self, array: np.ndarray, t: float) -> None:
-        """Raise :class:`ModelLimit` if the accepted state ``array`` reaches a limit."""
-        limit = self._limit_of(array)
-        if limit is not None:
-            raise ModelLimit(limit, t)
+        """On the branch: :class:`ModelLimit` if the accepted state ``array`` reaches a limit."""
+        if self.limits is not None:
+            self.limits.accepted(array, t)
 
     def _diagnose(self, dt: float, reason: int, failures: int) -> None:
         """After a step failed at 4 dt and again at dt for the same reason: is the last converged state

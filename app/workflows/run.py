@@ -10,17 +10,16 @@ from __future__ import annotations
 import time
 from dataclasses import asdict, dataclass
 
-from app import interrupt, logging_setup, timing
+from app import factory, interrupt, logging_setup, timing
 from app.io import checkpoint
 from app.io.output import OutputSettings, ResultWriter, versions
 from app.io.writes import ResultWriteError
-from app import factory
 from app.model.problem import Problem
-from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
-from app.solvers.newton import SolverSettings
+from app.model.surface import SurfaceProfiles, surface_profile
 from app.onset.branching import reference_length
 from app.onset.contact import ModelLimits
-from app.model.surface import SurfaceProfiles, surface_profile
+from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
+from app.solvers.newton import SolverSettings
 from app.solvers.stepping import ModelLimit, StepFailure, StepRecord, TimeSettings, TimeStepper
 
 ASSUMPTIONS = (
@@ -75,91 +74,12 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     failure does (status "failed", the checkpoint of that step if it can be written, everything else
     that can be written); then the :class:`~app.io.writes.ResultWriteError` is raised, on every rank."""
     log = logging_setup.get()
-    detail = log.info if progress else log.debug
     wall0 = time.perf_counter()
     settings = RunSettings.from_config(cfg)
-    columns = StepRecord.COLUMNS + (OnsetTracker.COLUMNS if settings.stability.enabled else ())
-    writer = None if resume else ResultWriter(outdir, comm, cfg, settings.output, columns=columns)
-    watch = interrupt.Watch(comm).__enter__()  # SIGINT/SIGTERM: recorded, acted on between steps
-    with timing.timed("setup"):
-        if problem is None:
-            problem = factory.problem(cfg, comm)
-        stepper = TimeStepper(problem, settings.time, settings.solver, log=log.info, limits=ModelLimits)
-        tracker = onset_tracker(problem, stepper, settings.stability, log=log.info, detail=detail,
-                                on_first_crossing=lambda crossing: writer.write_mode(problem, crossing),
-                                reference_length=reference_length(cfg))
-    watch.arm()  # gmsh reset SIGINT's handler
-    checkpoints = checkpoint.Checkpoints(outdir, cfg, settings.output.checkpoint_every, log=log.info)
-    if resume:
-        try:
-            checkpoints.resumed(checkpoint.restore(resume, problem, stepper, tracker), stepper.step)
-            writer = ResultWriter(outdir, comm, cfg, settings.output, columns=columns, resume_rows=resume.rows,
-                                  keep_mode=resume.crossings > 0)
-        except BaseException:
-            watch.__exit__()
-            stepper.destroy()
-            tracker.destroy()
-            raise
-    mats = problem.materials
-    log.info(f"hydrobuckle: {cfg['geometry']['kind']} mesh with {problem.cells()} cells, {problem.dofs()} dofs "
-             f"on {comm.size} rank(s); " + ", ".join(f"{name} mu0 = {m.mu0:.4f} MPa" for name, m in mats.items()))
-    writer.setup_fields(problem)
-    if resume:
-        log.info(f"hydrobuckle: resumed from {resume.path} at step {stepper.step}, t = {stepper.t:.6g} s "
-                 f"(written on {resume.meta['ranks']} rank(s))")
-        writer.write_fields(stepper.t, stepper.step)
-    else:
-        first = stepper.initial_record()
-        tracker.start(first)
-        writer.history_row(row_of(first))
-        writer.write_fields(0.0)
-        stepper.at_equilibrium(first)
-    status, message = "completed", ""
-    profiles = resume.profiles() if resume else SurfaceProfiles()  # the branch's, for profiles.npz/wrinkles.png
-    try:
-        while not stepper.done():
-            if writer.error is not None:  # agreed on every rank
-                status, message = "failed", str(writer.error)
-                log.info(f"hydrobuckle: {message}; stopping after {stepper.step} steps")
-                with timing.timed("output"):
-                    checkpoints.write(problem, stepper, tracker, writer.rows, profiles)
-                break
-            sig = watch.requested()  # collective: every rank leaves after the same step
-            if sig or (stop_after is not None and stepper.step >= stop_after):
-                status = "interrupted"
-                how = interrupt.name(sig) if sig else f"stop_after = {stop_after}"
-                message = f"interrupted by {how} at t = {writer.rows[-1]['time']:.6g} s after {stepper.step} steps"
-                log.info(f"hydrobuckle: {message}")
-                with timing.timed("output"):
-                    checkpoints.write(problem, stepper, tracker, writer.rows, profiles)
-                break
-            rec = stepper.advance()
-            writer.write_fields(rec.time, rec.step)
-            tracker.test(rec)
-            writer.history_row(row_of(rec))
-            detail(progress_line(rec))
-            if tracker.resolve():
-                break
-            if stepper.minimizing:  # on a followed branch: the surface profile of every state (wrinkles.png)
-                pos, prof, _, closed = surface_profile(problem, problem.state.x.array)
-                profiles.add(problem.growth(), stepper.t, pos, prof, closed)
-            if stepper.at_equilibrium(rec):
-                status = "equilibrium"
-                message = (f"equilibrium at t = {rec.time:.6g} s: relative fluid uptake rate {stepper.uptake_rate:.3g} "
-                           f"< time.stop_at_equilibrium = {settings.time.stop_at_equilibrium:g}")
-                log.info(f"hydrobuckle: {message}")
-                break
-            if checkpoints.due(rec.step):
-                with timing.timed("output"):
-                    checkpoints.write(problem, stepper, tracker, writer.rows, profiles)
-    except ModelLimit as err:
-        status, message = err.limit.status, str(err)
-        log.info(f"hydrobuckle: {message}")
-    except StepFailure as err:
-        status, message = "failed", str(err)
-        log.info(f"hydrobuckle: solver failure: {message}")
-    finally:
-        watch.__exit__()
+    with interrupt.Watch(comm) as watch:  # SIGINT/SIGTERM: recorded, acted on between steps
+        loop = RunLoop.build(cfg, outdir, comm, settings, problem, resume, progress, watch)
+        status, message = loop.run(stop_after)
+    problem, stepper, tracker, writer = loop.problem, loop.stepper, loop.tracker, loop.writer
     summary = summarize(status if status == "interrupted" else tracker.status(status), message, writer.rows[-1],
                         problem, stepper, tracker, settings, cfg, time.perf_counter() - wall0)
     if resume:  # provenance: steps and counters cover the whole run, wall_time_s this part only
@@ -170,22 +90,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     tracker.destroy()
     if status != "interrupted":  # under mpirun the ranks have 1 s after a SIGTERM (docs/reliability.md)
         writer.plot_history(summary.get("critical"))
-        writer.plot_branch(profiles, summary.get("critical"))
-    last = summary["final"]
-    log.info(f"hydrobuckle: {summary['status']} after {stepper.step} steps, t = {last['time']:.5g} s, "
-             f"growth = {1e3 * last['growth_mm']:.4f} um, wall {summary['wall_time_s']:.1f} s -> {outdir}")
-    if tracker.crossings:
-        c = tracker.crossings[0]
-        log.info(f"hydrobuckle: critical growth g_c = {1e3 * c.growth_mm:.4f} um at t_c = {c.time:.6f} s, "
-                 f"wrinkle count N_c = {c.wrinkle_count:g}")
-    so = summary.get("surface_onset")
-    if so is not None:
-        x, y = so["where"]
-        first = ("before the onset above: that N_c is a wave this mesh resolves, after the surface's own "
-                 "instability, which has no wavelength of its own" if tracker.crossings and so["before_critical"]
-                 else "after the onset above" if tracker.crossings else "(K itself stayed positive definite)")
-        log.info(f"hydrobuckle: the permeable surface is unstable at short waves (below the mesh) from t = "
-                 f"{so['time']:.6f} s, growth = {so['growth_um']:.4f} um, at ({x:.4g}, {y:.4g}) mm, {first}")
+        writer.plot_branch(loop.profiles, summary.get("critical"))
+    _report(summary, tracker, stepper.step, outdir, log)
     try:
         for step in after if writer.error is None else ():
             step(summary)
@@ -205,8 +111,150 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     if writer.error is not None:  # the checkpoint stays (a summary.json that failed: the run can be resumed)
         raise writer.error
     if summary["status"] not in ("interrupted", "failed"):  # ended normally: nothing to resume
-        checkpoints.remove(comm)
+        loop.checkpoints.remove(comm)
     return summary
+
+
+class RunLoop:
+    """One run's objects and its time loop: the stepper steps, and after every accepted step the writer
+    (fields, history row), the onset tracker (verdict, crossings), the progress line, the branch's surface
+    profiles and the checkpoints are told, in that order. The loop ends at time.end, at a crossing the
+    policy stops at, at equilibrium, at a model limit or a solver failure, or before a step when a signal
+    came (every rank agrees) or a result file could not be written; the last two leave a checkpoint."""
+
+    def __init__(self, problem, stepper, tracker, writer, checkpoints, watch, settings: RunSettings, profiles,
+                 detail):
+        self.problem, self.stepper, self.tracker, self.writer = problem, stepper, tracker, writer
+        self.checkpoints, self.watch, self.settings, self.profiles = checkpoints, watch, settings, profiles
+        self.log, self.detail = logging_setup.get(), detail
+
+    @classmethod
+    def build(cls, cfg: dict, outdir, comm, settings: RunSettings, problem, resume, progress: bool, watch) -> RunLoop:
+        """The problem (built unless given), stepper, tracker, writer and checkpoints of a run, with a resumed
+        checkpoint's state in place; the initial state recorded (a new run)."""
+        log = logging_setup.get()
+        detail = log.info if progress else log.debug
+        columns = StepRecord.COLUMNS + (OnsetTracker.COLUMNS if settings.stability.enabled else ())
+        writer = None if resume else ResultWriter(outdir, comm, cfg, settings.output, columns=columns)
+        with timing.timed("setup"):
+            if problem is None:
+                problem = factory.problem(cfg, comm)
+            stepper = TimeStepper(problem, settings.time, settings.solver, log=log.info, limits=ModelLimits)
+            tracker = onset_tracker(problem, stepper, settings.stability, log=log.info, detail=detail,
+                                    on_first_crossing=lambda crossing: loop.writer.write_mode(problem, crossing),
+                                    reference_length=reference_length(cfg))
+        watch.arm()  # gmsh reset SIGINT's handler
+        checkpoints = checkpoint.Checkpoints(outdir, cfg, settings.output.checkpoint_every, log=log.info)
+        if resume:
+            try:
+                checkpoints.resumed(checkpoint.restore(resume, problem, stepper, tracker), stepper.step)
+                writer = ResultWriter(outdir, comm, cfg, settings.output, columns=columns, resume_rows=resume.rows,
+                                      keep_mode=resume.crossings > 0)
+            except BaseException:
+                stepper.destroy()
+                tracker.destroy()
+                raise
+        profiles = resume.profiles() if resume else SurfaceProfiles()  # the branch's: profiles.npz, wrinkles.png
+        loop = cls(problem, stepper, tracker, writer, checkpoints, watch, settings, profiles, detail)
+        mats = problem.materials
+        log.info(f"hydrobuckle: {cfg['geometry']['kind']} mesh with {problem.cells()} cells, {problem.dofs()} "
+                 f"dofs on {comm.size} rank(s); "
+                 + ", ".join(f"{name} mu0 = {m.mu0:.4f} MPa" for name, m in mats.items()))
+        writer.setup_fields(problem)
+        if resume:
+            log.info(f"hydrobuckle: resumed from {resume.path} at step {stepper.step}, t = {stepper.t:.6g} s "
+                     f"(written on {resume.meta['ranks']} rank(s))")
+            writer.write_fields(stepper.t, stepper.step)
+        else:
+            first = stepper.initial_record()
+            tracker.start(first)
+            writer.history_row(row_of(first))
+            writer.write_fields(0.0)
+            stepper.at_equilibrium(first)
+        return loop
+
+    def run(self, stop_after: int | None = None) -> tuple[str, str]:
+        """Step to the end; the (status, message) the run ended with."""
+        stepper = self.stepper
+        try:
+            while not stepper.done():
+                stop = self._stop_before_step(stop_after)
+                if stop is not None:
+                    self._checkpoint()
+                    return stop
+                rec = stepper.advance()
+                self._observe(rec)
+                end = self._end_after(rec)
+                if end is not None:
+                    return end
+                if self.checkpoints.due(rec.step):
+                    self._checkpoint()
+        except ModelLimit as err:
+            self.log.info(f"hydrobuckle: {err}")
+            return err.limit.status, str(err)
+        except StepFailure as err:
+            self.log.info(f"hydrobuckle: solver failure: {err}")
+            return "failed", str(err)
+        return "completed", ""
+
+    def _stop_before_step(self, stop_after: int | None) -> tuple[str, str] | None:
+        """A result file that could not be written, or a signal (agreed on every rank), ``stop_after``."""
+        writer, stepper = self.writer, self.stepper
+        if writer.error is not None:  # agreed on every rank
+            self.log.info(f"hydrobuckle: {writer.error}; stopping after {stepper.step} steps")
+            return "failed", str(writer.error)
+        sig = self.watch.requested()  # collective: every rank leaves after the same step
+        if sig or (stop_after is not None and stepper.step >= stop_after):
+            how = interrupt.name(sig) if sig else f"stop_after = {stop_after}"
+            message = f"interrupted by {how} at t = {writer.rows[-1]['time']:.6g} s after {stepper.step} steps"
+            self.log.info(f"hydrobuckle: {message}")
+            return "interrupted", message
+        return None
+
+    def _observe(self, rec) -> None:
+        """Everything told of an accepted step, in order (the tracker's columns go into the history row)."""
+        self.writer.write_fields(rec.time, rec.step)
+        self.tracker.test(rec)
+        self.writer.history_row(row_of(rec))
+        self.detail(progress_line(rec))
+
+    def _end_after(self, rec) -> tuple[str, str] | None:
+        """The crossings located and the policy asked; on a branch the surface profile kept; equilibrium."""
+        stepper, problem = self.stepper, self.problem
+        if self.tracker.resolve():
+            return "completed", ""
+        if stepper.minimizing:  # on a followed branch: the surface profile of every state (wrinkles.png)
+            pos, prof, _, closed = surface_profile(problem, problem.state.x.array)
+            self.profiles.add(problem.growth(), stepper.t, pos, prof, closed)
+        if stepper.at_equilibrium(rec):
+            message = (f"equilibrium at t = {rec.time:.6g} s: relative fluid uptake rate {stepper.uptake_rate:.3g} "
+                       f"< time.stop_at_equilibrium = {self.settings.time.stop_at_equilibrium:g}")
+            self.log.info(f"hydrobuckle: {message}")
+            return "equilibrium", message
+        return None
+
+    def _checkpoint(self) -> None:
+        with timing.timed("output"):
+            self.checkpoints.write(self.problem, self.stepper, self.tracker, self.writer.rows, self.profiles)
+
+
+def _report(summary: dict, tracker, steps: int, outdir, log) -> None:
+    """The run's closing log lines: status, g_c and N_c, the surface's short-wave onset."""
+    last = summary["final"]
+    log.info(f"hydrobuckle: {summary['status']} after {steps} steps, t = {last['time']:.5g} s, "
+             f"growth = {1e3 * last['growth_mm']:.4f} um, wall {summary['wall_time_s']:.1f} s -> {outdir}")
+    if tracker.crossings:
+        c = tracker.crossings[0]
+        log.info(f"hydrobuckle: critical growth g_c = {1e3 * c.growth_mm:.4f} um at t_c = {c.time:.6f} s, "
+                 f"wrinkle count N_c = {c.wrinkle_count:g}")
+    so = summary.get("surface_onset")
+    if so is not None:
+        x, y = so["where"]
+        first = ("before the onset above: that N_c is a wave this mesh resolves, after the surface's own "
+                 "instability, which has no wavelength of its own" if tracker.crossings and so["before_critical"]
+                 else "after the onset above" if tracker.crossings else "(K itself stayed positive definite)")
+        log.info(f"hydrobuckle: the permeable surface is unstable at short waves (below the mesh) from t = "
+                 f"{so['time']:.6f} s, growth = {so['growth_um']:.4f} um, at ({x:.4g}, {y:.4g}) mm, {first}")
 
 
 def summarize(status: str, message: str, last: dict, problem, stepper, tracker, settings: RunSettings, cfg: dict,
