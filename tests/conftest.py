@@ -26,6 +26,9 @@ from app import config, logging_setup
 #: its computation has no communicator (the 1D reduction, config validation): every rank would compute the same
 rank_local = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="rank-local computation: every rank would repeat "
                                 "it; the serial session runs it")
+#: a long physics check (minutes) whose distributed runs the 1 = 2 ranks comparisons (test_parallel.py) cover
+long_physics = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="a long physics check: the serial session runs "
+                                  "it; 1 = 2 ranks is tests/test_parallel.py's")
 #: it starts its own runs as child processes from rank 0 (serially and under mpirun -n 2) and checks them there
 child_jobs = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="starts its own runs as child processes (1 and 2 "
                                 "ranks): the serial session starts the same ones")

@@ -40,14 +40,14 @@ def _copy_with(tmp: Path, path: str, line: str) -> Path:
 
 def test_an_upward_import_breaks_the_contract(shared_tmp):
     """The physics importing the command line (model -> cli), and a gmsh builder importing app/."""
-    where = _copy_with(shared_tmp / "up", "app/model/material.py", "from app import cli  # noqa: E402")
-    done = on_rank0(_lint, where)
+    done = on_rank0(lambda: _lint(_copy_with(shared_tmp / "up", "app/model/material.py",
+                                             "from app import cli  # noqa: E402")))
     assert done.returncode == 1, done.stdout[-3000:]
     assert "app.model is not allowed to import app.cli" in done.stdout, done.stdout[-3000:]
     assert "app.model.material -> app.cli" in done.stdout, done.stdout[-3000:]
     assert "1 kept, 1 broken" in done.stdout, done.stdout[-2000:]
 
-    where = _copy_with(shared_tmp / "meshes", "meshes/bilayer.py", "import app.schema  # noqa: E402")
-    done = on_rank0(_lint, where)
+    done = on_rank0(lambda: _lint(_copy_with(shared_tmp / "meshes", "meshes/bilayer.py",
+                                             "import app.schema  # noqa: E402")))
     assert done.returncode == 1, done.stdout[-3000:]
     assert "meshes.bilayer -> app.schema" in done.stdout, done.stdout[-3000:]

@@ -20,7 +20,7 @@ import subprocess
 import numpy as np
 import pytest
 import ufl
-from conftest import EXE, child_env, child_jobs, on_rank0, rank_local
+from conftest import EXE, child_env, child_jobs, long_physics, on_rank0, rank_local
 from scipy.optimize import brentq
 
 from app import compat, config
@@ -156,6 +156,7 @@ def test_error_bar_covers_a_finer_computation():
     assert abs(a["time"] - b["time"]) <= a["time_error"]
 
 
+@long_physics
 @pytest.mark.parametrize("name", ["bilayer", "tube"])
 def test_2d_default_onset_and_the_reduction_lie_within_each_others_error_bars(name, shared_tmp, comm):
     """The paper's default bilayer and tube in 2D (their own error estimate) and their exact 1D counterparts,
