@@ -66,6 +66,13 @@ mount --bind "$here" "$root/hydrobuckle"
 mkdir -p "$here/.venv"
 mount --bind "$root/opt/hydrobuckle-venv" "$root/hydrobuckle/.venv"
 cp -L /etc/resolv.conf "$root/etc/resolv.conf" 2>/dev/null || true
+# pip in the root (scripts/test-requirements.txt) trusts what this machine trusts: a TLS-inspecting proxy's
+# certificate authority may be in this machine's bundle only
+pip_cert=()
+if [ -f /etc/ssl/certs/ca-certificates.crt ]; then
+  cp -L /etc/ssl/certs/ca-certificates.crt "$root/etc/hydrobuckle-host-ca.crt"
+  pip_cert=(PIP_CERT=/etc/hydrobuckle-host-ca.crt)
+fi
 
 # A clean environment in the root; hydrobuckle's own switches (HYDROBUCKLE_TEST_PARTS, _NO_WARMUP, ...)
 # pass through, except the venv (the root has its own) and this script's.
@@ -78,7 +85,7 @@ while IFS='=' read -r name _; do
 done < <(env)
 in_root() {
   chroot "$root" /usr/bin/env -i HOME=/root PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
-    LANG=C.UTF-8 CI="${CI:-}" OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "${pass[@]}" \
+    LANG=C.UTF-8 CI="${CI:-}" OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "${pip_cert[@]}" "${pass[@]}" \
     bash -c 'cd /hydrobuckle && exec "$@"' debian13 "$@"
 }
 

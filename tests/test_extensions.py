@@ -56,7 +56,8 @@ def slow_gel():
 
 def test_a_registered_criterion_runs_like_the_matrix_it_uses(fast, shared_tmp, comm):
     """stability.criterion = fast with fast_tau = 0.02 s finds the onset of rate with tau = 0.02 s (the same
-    matrix built through the registry): the same bracket and g_c; summary.json names it with its key."""
+    matrix built through the registry): the same bracket and g_c (bit for bit serially); summary.json names
+    it with its key."""
     schema = config.schema()["stability"]
     assert "fast" in schema["criterion"].doc and "fast_tau" in schema
     with pytest.raises(ConfigError, match="stability.fast_tau"):
@@ -67,8 +68,11 @@ def test_a_registered_criterion_runs_like_the_matrix_it_uses(fast, shared_tmp, c
                                  "stability.error_estimate=false"), shared_tmp / "rate", comm, progress=False)
     assert toy["status"] == ref["status"] == "buckled"
     assert toy["critical"]["criterion"] == {"name": "fast", "fast_tau": 0.02}
-    assert toy["critical"]["bracket"] == ref["critical"]["bracket"]
-    assert toy["critical"]["growth_mm"] == ref["critical"]["growth_mm"]
+    # bit for bit serially; on 2 ranks MUMPS' parallel factorization leaves run-to-run roundoff (measured on
+    # Debian 13: brackets 1e-15 apart between two runs; tests/test_screening.py saw up to 2.7e-10)
+    tight = 0.0 if comm.size == 1 else 1e-9
+    assert toy["critical"]["bracket"] == pytest.approx(ref["critical"]["bracket"], rel=tight, abs=0.0)
+    assert toy["critical"]["growth_mm"] == pytest.approx(ref["critical"]["growth_mm"], rel=tight, abs=0.0)
 
 
 def test_a_registered_law_runs_like_the_law_it_restates(slow_gel, shared_tmp, comm):
