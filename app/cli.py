@@ -224,7 +224,9 @@ def cmd_sweep(args) -> int:
     try:
         cases = studies.sweep_cases(args.config, args.param, config.parse_values(args.values), outdir, args.set,
                                     isomodes=bool(args.isomodes), error_estimate=args.error_estimate)
-    except ValueError as err:
+    except config.ConfigError:
+        raise
+    except ValueError as err:  # a value the TOML reader or a case's resolution could not take
         raise config.ConfigError("", f"config file '{args.config}': {err}") from None
     title = f"{Path(args.config).stem}: sweep of {args.param}"
     return _run_study(studies, outdir, cases, title, args.param, args)
@@ -235,8 +237,8 @@ def _run_study(studies, outdir, cases, title, param, args) -> int:
     from app.workflows import preflight
 
     comm = _comm()
-    preflight.check([c.cfg for c in cases], comm, outdir, [f"case {c.label}" for c in cases],
-                    reduced=args.reduced, ranks_per_case=args.ranks_per_case)
+    preflight.check([c.cfg for c in cases], comm, outdir, [c.label for c in cases], reduced=args.reduced,
+                    ranks_per_case=args.ranks_per_case)
     _start(comm, args)
     rows = studies.run_study(cases, outdir, comm, title, param, args.ranks_per_case, args.force,
                              "reduced" if args.reduced else "2d")
@@ -253,7 +255,7 @@ def cmd_bench(args) -> int:
     comm, outdir = _comm(), Path(args.output)
     _no_resume(args)
     sizes, ranks = bench.parse_sizes(args.sizes), bench.parse_ranks(args.ranks, comm)
-    bench.check(sizes, args.set, outdir, comm)
+    bench.check(sizes, args.set, args.output, comm)  # the directory named as the user wrote it
     _start(comm, args)
     try:
         text = bench.command(sizes, ranks, args.set, outdir, comm, args.json_only)

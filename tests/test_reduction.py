@@ -226,7 +226,29 @@ def test_answer_does_not_depend_on_the_largest_wavenumber_screened(sets):
         assert fa["mode_number"] == fb["mode_number"] and fb["growth_um"] == pytest.approx(fa["growth_um"], rel=1e-9)
 
 
-def test_study_by_the_reduction_matches_single_computations_and_reruns_nothing(shared_tmp, comm):
+def test_the_reduction_beside_a_run_is_computed_once_and_reaches_every_rank(shared_tmp, comm):
+    """reduced.beside_2d on the small swelling bilayer on every rank count (the long default bilayer and tube,
+    compared with their 2D onsets, run in the serial session only): the 1D block is computed on rank 0, and
+    every rank's summary holds the same one, equal to the reduction computed alone for this config (but for
+    its wall time)."""
+    from cases import swelling_case
+
+    from app.workflows.pipeline import run_case
+
+    cfg = swelling_case("reduced.beside_2d=true", "stability.error_estimate=false")
+    s = run_case(cfg, shared_tmp / "run", comm, progress=False)
+    def timeless(d):  # the block without its wall times (those of the levels too)
+        if isinstance(d, dict):
+            return {k: timeless(v) for k, v in d.items() if k not in ("seconds", "_estimate")}
+        return [timeless(v) for v in d] if isinstance(d, list) else d
+
+    block = timeless(s["reduced"])
+    assert len({json.dumps(b, sort_keys=True) for b in comm.allgather(block)}) == 1
+    assert block == on_rank0(lambda: timeless(reduced.compute(cfg)))
+    assert block["solver"] == "reduced-1d" and block["kind"] not in ("failed", "interrupted"), block
+
+
+def test_study_by_the_reduction_matches_single_computations_and_reruns_nothing(shared_tmp, comm, capsys):
     """``study bilayer-modulus-ratio --reduced`` (two values): each row is the single reduced computation
     of its case (solver column reduced-1d, the same g and N_c), a rerun keeps every case, and a study the
     reduction does not cover is refused with one line naming the case, exit 2, nothing created."""
@@ -246,8 +268,13 @@ def test_study_by_the_reduction_matches_single_computations_and_reruns_nothing(s
     assert cli.main(["study", "bilayer-modulus-ratio", "--reduced", "--values", "4,8", "-o", str(out), "-q"]) == 0
     assert on_rank0(lambda: (out / "modulus_ratio=8" / "summary.json").stat().st_mtime_ns) == stamp
     bad = shared_tmp / "rbad"
+    capsys.readouterr()
     assert cli.main(["study", "tube-aspect-ratio", "--reduced", "-o", str(bad)]) == 2
     assert not on_rank0(bad.exists)
+    if comm.rank == 0:  # one line, naming the key and the case once
+        line, = capsys.readouterr().err.strip().splitlines()
+        assert line.startswith("hydrobuckle: error: ") and "--reduced" in line, line
+        assert line.count("case ") == 1 and "case aspect_ratio=" in line, line
 
 
 @pytest.mark.parametrize("criterion", ["drained", "undrained"])

@@ -51,6 +51,8 @@ def test_cli_study_rejects_bad_input(shared_tmp, capsys):
     assert "aspect_ratio <= 1.5465" in capsys.readouterr().err or MPI.COMM_WORLD.rank != 0
     assert not (shared_tmp / "x").exists()
     assert cli.main(["sweep", "nope.toml", "--param", "a.b", "--values", "1"]) == 2
+    if MPI.COMM_WORLD.rank == 0:  # the line names the file once
+        assert capsys.readouterr().err.strip().splitlines() == ["hydrobuckle: error: config file 'nope.toml' does not exist"]
 
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="groups of ranks need several ranks")

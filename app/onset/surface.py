@@ -141,7 +141,7 @@ class SurfaceCheck:
                                 root=owner)
         if prev is None:  # unstable in the first state tested
             return {"kind": "surface", "time": time, "growth_mm": growth_mm, "growth_um": 1e3 * growth_mm,
-                    "where": list(where), "criterion": self._criterion_name(), "bracket": [time, time]}
+                    "where": list(where), "criterion": self._label, "bracket": [time, time]}
         t0, g0, _, cols0 = prev
         lo, hi = t0, time
         loading = self.problem.loading
@@ -160,10 +160,7 @@ class SurfaceCheck:
         f = (t - t0) / (time - t0)
         g = (1 - f) * g0 + f * growth_mm
         return {"kind": "surface", "time": t, "growth_mm": g, "growth_um": 1e3 * g, "where": list(where),
-                "criterion": self._criterion_name(), "bracket": [t0, time]}
-
-    def _criterion_name(self) -> str:
-        return self._label
+                "criterion": self._label, "bracket": [t0, time]}
 
 
 class SurfaceState:

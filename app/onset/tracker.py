@@ -334,12 +334,6 @@ class Untracked:
     def destroy(self) -> None:
         pass
 
-    def export_state(self) -> None:
-        return None
-
-    def import_state(self, state) -> None:
-        pass
-
     def checkpoint_state(self, ref) -> None:
         return None
 

@@ -156,7 +156,9 @@ class TimeStepper:
         self.minimizing = False  # past an onset with stability.after_onset = "branch": follow_minimizers
         self.energy_rejections = 0  # minimizer solves whose energy ended above the initial guess's
         # where a followed branch ends: limits(problem) -> app.onset.contact.ModelLimits (new_step,
-        # failed_attempt, out_of_steps, accepted; raising ModelLimit), built once minimizing; None: no limits
+        # failed_attempt, out_of_steps, accepted; raising ModelLimit), built once minimizing. None: a branch
+        # is followed without any check (no contact, no inverted cell): a run passes ModelLimits
+        # (app.workflows.run, tests/conftest.time_stepper)
         self._limits_of = limits
         self.limits = None
 

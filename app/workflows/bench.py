@@ -256,7 +256,7 @@ def parse_ranks(text: str | None, comm) -> list[int] | None:
     return ranks
 
 
-def check(sizes: list[str], overrides: list[str], outdir: Path, comm) -> None:
+def check(sizes: list[str], overrides: list[str], outdir, comm) -> None:
     """The pre-flight of every size's config (app.workflows.preflight), then the directory claimed."""
     from app.workflows import preflight
 

@@ -16,7 +16,8 @@ def check(cfgs: list[dict], comm, outdir, labels: list[str] | None = None, force
           inputs: bool = True) -> None:
     """The checks of one command's cases, in this order: the 1D reduction's reach (``reduced``), each mesh's
     size (``sizes``; ``force`` only for a single run, ``labels`` None), the ranks per case, the geometries'
-    input files (``inputs``), then the result directory ``outdir`` (claimed last; None: not yet)."""
+    input files (``inputs``), then the result directory ``outdir`` (claimed last; None: not yet).
+    ``labels``: the cases' labels (a study's or sweep's), named in the errors as "case <label>"."""
     if reduced:
         from app.reduced.section import reducible
 
@@ -27,7 +28,7 @@ def check(cfgs: list[dict], comm, outdir, labels: list[str] | None = None, force
                        config.ConfigError("", why))
     if sizes:
         for i, cfg in enumerate(cfgs):
-            mesh_size(cfg, force and labels is None, None if labels is None else labels[i])
+            mesh_size(cfg, force and labels is None, None if labels is None else f"case {labels[i]}")
     if ranks_per_case is not None and not 1 <= ranks_per_case <= comm.size:
         raise config.ConfigError("--ranks-per-case", f"= {ranks_per_case} is out of range; "
                                  f"allowed: 1..{comm.size} (the number of MPI ranks)")
