@@ -6,7 +6,7 @@ factor and solve; the physics of each matrix is written here, once.
   with a zero increment (the "rate" and "undrained" criteria, the cut-back diagnosis, the branch's content
   flux). Its form has the problem's own form signature: the same compiled kernel and a K identical to the
   problem's bit for bit (``tests/test_solver_independence.py``).
-- :func:`drained_hessian`: the stored energy's Hessian in (u, c), u in Q1, c the fluid content of each cell
+- :class:`DrainedHessian`: the stored energy's Hessian in (u, c), u in Q1, c the fluid content of each cell
   (DG0): what the "drained" criterion's Schur complement is built from.
 
 Each record's :meth:`refresh` sets its coefficients from the problem's converged state (read only) before an
@@ -39,7 +39,6 @@ class OwnHessian:
     space: object  # the mixed space W
     bcs: list  # the problem's Dirichlet conditions (which dofs are fixed)
     u_dofs: np.ndarray  # W's displacement dofs (local)
-    q_dofs: np.ndarray  # W's flux dofs (local)
     source: object  # the problem's converged state (u_n, Q_n), read only
     step: float  # the tau every refresh sets
 
@@ -70,7 +69,7 @@ def zero_increment_hessian(problem, tau: float) -> OwnHessian:
     tau_c = compat.Constant(p.domain, compat.ScalarType(tau))
     mu_bar = compat.Constant(p.domain, compat.ScalarType(0.0))  # does not enter K (linear in dQ)
     pot = build(work, state, type(p.mat)(**fields), tau_c, mu_bar, p.dx, p.surface_measure, p.dx_coupling)
-    return OwnHessian(compat.form(pot.hessian), work, state, tau_c, p.W, p.bcs, p.u_dofs, p.q_dofs, p.state, tau)
+    return OwnHessian(compat.form(pot.hessian), work, state, tau_c, p.W, p.bcs, p.u_dofs, p.state, tau)
 
 
 class DrainedHessian:
@@ -119,7 +118,3 @@ class DrainedHessian:
         out = np.zeros_like(p.state.x.array)
         out[p.u_dofs] = u.x.array
         return out
-
-
-def drained_hessian(problem) -> DrainedHessian:
-    return DrainedHessian(problem)

@@ -74,10 +74,10 @@ class Drained(Criterion):
         if problem.permeable_facets() == 0:
             raise ValueError("stability.criterion = 'drained' needs a permeable boundary (the fluid content of a "
                              "closed body is conserved); use 'undrained' or 'rate'")
-        from app.model.operators import drained_hessian
+        from app.model.operators import DrainedHessian
         from app.solvers.stability import DrainedOperator
 
-        return DrainedOperator(drained_hessian(problem), problem.comm)
+        return DrainedOperator(DrainedHessian(problem), problem.comm)
 
 
 class Undrained(Criterion):

@@ -358,7 +358,7 @@ class TimeStepper:
         as the first when diffusion is off). Negative eigenvalues in either mean the state has lost
         stability and no smaller step can follow the fundamental path: raise :class:`LostStability`
         instead of cutting back to dt_min. Both positive definite let the cut-back go on."""
-        from app.model.operators import drained_hessian, zero_increment_hessian
+        from app.model.operators import DrainedHessian, zero_increment_hessian
         from app.solvers.stability import DrainedOperator, HessianOperator, StabilityAnalyzer
 
         p, found = self.p, []
@@ -366,7 +366,7 @@ class TimeStepper:
             if criterion == "drained" and p.permeable_facets() == 0:
                 continue
             op = (HessianOperator(zero_increment_hessian(p, dt), p.comm) if criterion == "rate" else
-                  DrainedOperator(drained_hessian(p), p.comm))
+                  DrainedOperator(DrainedHessian(p), p.comm))
             analyzer = StabilityAnalyzer(op, p.comm)
             try:
                 nneg = analyzer.inertia()[0]
