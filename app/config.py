@@ -14,95 +14,36 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from app.schema import ConfigError, Key  # noqa: F401  (re-exported: config.ConfigError, config.Key)
-from app.schema import ge as _ge, gt as _gt, in_closed as _in_closed, in_open as _in_open
-from app.schema import key as _key, one_of as _one_of, unset
+from app.geometry.keys import MESH
+from app.io.keys import OUTPUT
+from app.model.keys import QUADRATURE
+from app.onset.keys import STABILITY
+from app.reduced.keys import KEYS as REDUCED
+from app.schema import ConfigError, Key, unset  # noqa: F401  (re-exported: config.ConfigError, config.Key)
+from app.schema import gt as _gt
+from app.schema import key as _key
+from app.schema import one_of as _one_of
+from app.solvers.keys import SOLVER, TIME
 
 _STATIC: dict[str, dict[str, Key] | dict] = {
     "geometry": {},  # built from the registered geometry kinds: see _geometry_table
-    "mesh": {
-        "element_size": _key(float, None, _gt(0), "element length along the film surface [mm]", optional=True),
-        "film_layers": _key(int, None, _in_closed(1, 200), "element layers through the film", optional=True),
-        "substrate_grading": _key(float, 1.15, _in_closed(1.0, 3.0),
-                                  "element-height ratio away from the film; 1 = uniform"),
-        "film_grading": _key(float, 1.0, _in_closed(1.0, 4.0),
-                             "film element-height ratio towards the permeable surface; 1 = uniform"),
-        "refinements": _key(int, 0, _in_closed(0, 4),
-                            "geometry.kind = 'msh' only: split every quadrilateral of the file into 4 this many "
-                            "times (gmsh's uniform refinement; physical groups kept, new nodes on the file's "
-                            "straight edges)"),
-        "quadrature_degree": _key(int, 2, _in_closed(1, 8), "quadrature degree of the cell integrals"),
-        "coupling_quadrature_degree": _key(int, 1, _in_closed(0, 8),
-                                           "quadrature degree of the volumetric penalty term (0/1 = one point: "
-                                           "selective reduced integration)"),
-    },
+    "mesh": {**MESH, **QUADRATURE},
     "material": {},  # built from the registered material laws: see _material_table
     "loading": {},  # built from the registered loadings: see _loading_table
-    "time": {
-        "end": _key(float, 10.0, _gt(0), "[s]"),
-        "dt_initial": _key(float, 1.0e-3, _gt(0), "[s]"),
-        "dt_max": _key(float, 5.0, _gt(0), "[s]"),
-        "dt_min": _key(float, 1.0e-9, _gt(0), "smallest step before the run is declared failed [s]"),
-        "tolerance": _key(float, 5.0e-4, _gt(0), "local error tolerance (fluid content) of the adaptive step"),
-        "adaptive": _key(bool, True, None, "false: fixed steps of dt_initial (cut back only on divergence)"),
-        "max_steps": _key(int, 100000, _ge(1)),
-        "stop_at_equilibrium": _key(float, 0.0, _ge(0.0),
-                                    "end the run (status equilibrium) once the relative fluid uptake rate "
-                                    "|dV/dt| t / |V - V(0)| after the last loading kink is below this; 0 = off"),
-    },
-    "solver": {
-        "rtol": _key(float, 1.0e-9, _in_open(0.0, 1.0), "Newton relative residual tolerance"),
-        "atol": _key(float, 1.0e-11, _gt(0), "Newton absolute residual tolerance"),
-        "max_it": _key(int, 25, _in_closed(1, 1000), "Newton iterations per step"),
-        "factorization": _key(str, "cholesky", _one_of("cholesky", "lu"),
-                              "direct solver of each Newton step (MUMPS LDL^T or LU)"),
-        "linear": _key(str, "direct", _one_of("direct", "iterative"),
-                       "Newton's linear solves: MUMPS factorization, or preconditioned Krylov (large meshes)"),
-        "ksp_rtol": _key(float, 1.0e-10, _in_open(0.0, 1.0), "relative tolerance of the iterative linear solves"),
-        "ksp_max_it": _key(int, 2000, _ge(1), "iterations per iterative linear solve"),
-    },
-    "stability": {
-        "enabled": _key(bool, True, None, "test K for positive definiteness after every step"),
-        "tolerance": _key(float, 1.0e-3, _in_open(0.0, 0.5), "relative bracket width of the onset time"),
-        "stop_at_onset": _key(bool, True, None, "false: continue on the unbuckled path and record later crossings "
-                              "(the same as after_onset = \"fundamental\")"),
-        "after_onset": _key(str, None, _one_of("stop", "fundamental", "branch"),
-                            "what follows the onset: stop; continue on the unbuckled (fundamental) path; or follow "
-                            "the buckled branch (docs/postbuckling.md). Unset: from stop_at_onset", optional=True),
-        "imperfection": _key(float, 0.01, _in_closed(-1.0, 1.0),
-                             "after_onset = branch: the mode's peak surface normal displacement added at the onset, "
-                             "as a fraction of geometry.film_thickness (or mesh.element_size, or a .msh mesh's "
-                             "sqrt(area/cells)); sign = direction, not 0"),
-        "modes": _key(int, 3, _in_closed(1, 50), "eigenpairs reported at the onset"),
-        "eigen_every": _key(int, 0, _ge(0), "also compute lambda_min every n steps (0 = only at the onset)"),
-        "surface_check": _key(bool, True, None,
-                              "check the permeable surface's short-wave limit every step from the local state: "
-                              "reports where and when it becomes unstable at waves below the mesh "
-                              "(summary.json surface_onset, docs/reduction.md)"),
-        "screening": _key(str, "newton", _one_of("newton", "exact"),
-                          "per-step test: inertia of the Newton factor (confirmed exactly) or exact K"),
-        "max_crossings": _key(int, 20, _ge(1), "with stop_at_onset = false: stop after this many"),
-        "error_estimate": _key(bool, True, None,
-                               "estimate g_c's discretization error with two coarsened companion runs"),
-    },
-    "reduced": {},  # declared by the 1D reduction: app/reduced/keys.py
-    "output": {
-        "fields": _key(bool, True, None, "write fields.xdmf"),
-        "every": _key(int, 1, _ge(1), "write fields every n accepted steps"),
-        "plot": _key(bool, True, None, "write history.png"),
-        "checkpoint_every": _key(int, 10, _ge(0), "write checkpoint.npz every n accepted steps (and when "
-                                 "interrupted), for 'run --resume'; 0 = off"),
-    },
+    "time": TIME,
+    "solver": SOLVER,
+    "stability": STABILITY,  # with the registered criteria: see _stability_table
+    "reduced": REDUCED,
+    "output": OUTPUT,
 }
+"""The tables in the order a resolved config lists them; each component declares its own keys."""
 
 
 def schema() -> dict:
     """The whole schema: the static tables above, with the geometry, material and loading tables built
     from the registered geometry kinds, material laws and loadings (so one registered later, e.g. by a
     test, is part of it at once)."""
-    from app.reduced.keys import KEYS as reduced_keys
-
-    return {**_STATIC, "stability": _stability_table(), "reduced": dict(reduced_keys), "geometry": _geometry_table(),
+    return {**_STATIC, "stability": _stability_table(), "reduced": dict(REDUCED), "geometry": _geometry_table(),
             "material": _material_table(), "loading": _loading_table()}
 
 

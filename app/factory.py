@@ -1,15 +1,21 @@
 """Where a resolved config becomes hydrobuckle's objects: each layer's material under the config's law, the
 discrete problem (geometry, materials, loading, discretization) and the 1D cross-section of the exact
-reduction. Above config.py (it reads the config through it) and below io/ and the workflows; model/ and
-reduced/ take these objects and never see a config dict's structure."""
+reduction; the time stepper of a problem, with the onset layer's limits and diagnosis given to it. Above
+config.py (it reads the config through it) and below io/ and the workflows; model/, solvers/ and reduced/ take
+these objects and never see a config dict's structure, and solvers/ never see a problem."""
 
 from __future__ import annotations
 
 from app import config, geometry
 from app.model.loading import Loading
 from app.model.material import Material
+from app.model.operators import cell_content_change
 from app.model.problem import Discretization, Problem
+from app.onset.contact import ModelLimits
+from app.onset.criteria import LossOfStability
 from app.reduced.section import Layer, NotReducible, Section, drive, reducible
+from app.solvers.newton import SolverSettings
+from app.solvers.stepping import Evolution, TimeSettings, TimeStepper
 
 
 def layer_materials(cfg: dict, names=("film", "substrate")) -> dict[str, Material]:
@@ -27,6 +33,22 @@ def problem(cfg: dict, comm, setup: geometry.GeometrySetup | None = None) -> Pro
     surface = setup.material_under("permeable", comm)
     loading = Loading.from_config(cfg, mu_start=materials[surface].mu0, drive=setup.drive)
     return Problem(comm, setup, materials, loading, Discretization.from_config(cfg))
+
+
+def evolution(p: Problem) -> Evolution:
+    """What the time stepper advances of a problem: its forms, conditions, index sets and hooks."""
+    return Evolution(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w, p.state, p.u_dofs, p.q_dofs,
+                     p.comm, cell_content_change(p), tuple(p.loading.kinks()), p.diffusion, p.set_time,
+                     p.step_influx, p.observables)
+
+
+def time_stepper(p: Problem, time: TimeSettings, solver: SolverSettings, log=None, limits: bool = True,
+                 diagnose: bool = True) -> TimeStepper:
+    """The problem's time stepper; ``limits``: a followed branch ends at self-contact or an inverted cell
+    (:class:`app.onset.contact.ModelLimits`); ``diagnose``: two failed attempts in a row test the state's
+    stability (:class:`app.onset.criteria.LossOfStability`)."""
+    return TimeStepper(evolution(p), time, solver, log=log, limits=(lambda: ModelLimits(p)) if limits else None,
+                       check=LossOfStability(p) if diagnose else None)
 
 
 def section(cfg: dict) -> Section:

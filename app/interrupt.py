@@ -138,6 +138,26 @@ def _flush() -> None:
             pass
 
 
+_files_held_open = False  # an HDF5 file that must never be closed (app.io.hdf5.abandon): end_process
+
+
+def hold_files_open() -> None:
+    global _files_held_open
+    _files_held_open = True
+
+
+def finish(code: int, process: bool) -> int:
+    """A command's exit code: 130 / 143 after SIGINT / SIGTERM, else ``code``. ``process``: the command runs
+    as the process itself, so the ranks agree on the code (:func:`leave`) and a process that holds an HDF5
+    file open for good ends here (:func:`end_process`)."""
+    code = exit_code() or code
+    if process:
+        code = leave(code)
+        if _files_held_open:
+            end_process(job_code)
+    return code
+
+
 def end_process(code: int) -> None:
     """End a process that holds abandoned HDF5 files with the job's (non-zero) ``code``, agreed by the ranks
     (:func:`leave`): output flushed, then exit at once. Neither destructors nor MPI_Finalize run:

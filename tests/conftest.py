@@ -21,7 +21,6 @@ from mpi4py import MPI
 
 from app import config, logging_setup
 
-
 # Tests that the 2-rank session leaves to the serial one, because there they would only repeat it:
 #: its computation has no communicator (the 1D reduction, config validation): every rank would compute the same
 rank_local = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="rank-local computation: every rank would repeat "
@@ -74,12 +73,11 @@ def small_bilayer(**overrides) -> dict:
 
 def time_stepper(problem, cfg: dict):
     """A TimeStepper with the [time] and [solver] settings of a resolved config."""
-    from app.onset.contact import ModelLimits
-    from app.solvers.stepping import TimeStepper
+    from app import factory
     from app.workflows.run import RunSettings
 
     settings = RunSettings.from_config(cfg)
-    return TimeStepper(problem, settings.time, settings.solver, limits=ModelLimits)
+    return factory.time_stepper(problem, settings.time, settings.solver)
 
 
 def run_to_end(cfg: dict, comm):

@@ -13,11 +13,10 @@ import json
 import pytest
 from cases import swelling_case
 
-from app import config
-from app import factory
+from app import config, factory
 from app.model.theory import constrained_layer_stretch
-from app.solvers import newton, stepping
 from app.onset.criteria import rate_matrix
+from app.solvers import newton, stepping
 from app.workflows.run import simulate
 
 H = 0.01  # layer thickness [mm]: substrate 0.005 + film 0.005 of the same material
@@ -84,7 +83,7 @@ def _near_equilibrium_run(comm, floor: bool, monkeypatch):
     from app.workflows.run import RunSettings
 
     s = RunSettings.from_config(cfg)
-    st = stepping.TimeStepper(p, s.time, s.solver)
+    st = factory.time_stepper(p, s.time, s.solver, limits=False)
     rows = [st.initial_record()]
     failure = None
     try:
@@ -126,7 +125,7 @@ def test_failing_steps_past_the_onset_are_diagnosed_not_cut_to_dt_min(comm, shar
 
     def spy(self, dt, reason, failures):
         counts["failures"], counts["t"], counts["tau"] = failures, self.t, dt
-        analyzer = rate_matrix(self.p, dt)
+        analyzer = rate_matrix(self.check.problem, dt)
         counts["nneg"] = analyzer.inertia()[0]
         analyzer.destroy()
         real(self, dt, reason, failures)
@@ -160,7 +159,7 @@ def test_diagnosis_lets_the_cut_back_go_on_where_K_is_positive_definite(comm, mo
     from app.workflows.run import RunSettings
 
     s = RunSettings.from_config(cfg)
-    st = stepping.TimeStepper(p, s.time, s.solver)
+    st = factory.time_stepper(p, s.time, s.solver, limits=False)
     calls = []
     real_attempt = st.attempt
 

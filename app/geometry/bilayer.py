@@ -14,13 +14,13 @@ if TYPE_CHECKING:
 
 class Bilayer(GeometryKind):
     name = "bilayer"
+    provides = frozenset({"drive"})  # a displacement loading moves the right edge
+    mesh_defaults = {"element_size": 0.004, "film_layers": 8}
+    film_element_fraction = 0.4
     keys = {
         "length": key(float, 2.0, gt(0), "L [mm] (bilayer)", unit="mm"),
         **layer_keys(substrate=0.5, film=0.01),
     }
-    mesh_defaults = {"element_size": 0.004, "film_layers": 8}
-    film_element_fraction = 0.4
-    provides = frozenset({"drive"})
 
     def validate(self, cfg: dict) -> None:
         geo, mesh = cfg["geometry"], cfg["mesh"]

@@ -5,6 +5,8 @@ nothing here depends on the dolfinx version."""
 
 from __future__ import annotations
 
+from app import interrupt
+
 _hdf5 = {"lib": None, "looked": False, "callbacks": None}
 _abandoned: list = []  # HDF5 files that failed inside HDF5: never closed (see abandon)
 
@@ -100,9 +102,7 @@ class HDF5Errors:
 def abandon(xdmf_file) -> None:
     """Keep an XDMFFile that failed inside HDF5 alive and never close it: its close (also the one its
     destructor makes) would wait in a collective for a rank that left, or throw from the destructor
-    (measured: std::terminate at exit). The CLI ends such a process with :func:`app.interrupt.end_process`."""
+    (measured: std::terminate at exit). The CLI ends such a process with :func:`app.interrupt.end_process`
+    (:func:`app.interrupt.finish`)."""
     _abandoned.append(xdmf_file)
-
-
-def has_abandoned() -> bool:
-    return bool(_abandoned)
+    interrupt.hold_files_open()

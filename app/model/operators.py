@@ -118,3 +118,27 @@ class DrainedHessian:
         out = np.zeros_like(p.state.x.array)
         out[p.u_dofs] = u.x.array
         return out
+
+
+@dataclass
+class CellContentChange:
+    """The fluid content a flux increment adds to each cell, as a cell average: ``form`` assembles, against
+    the DG0 test function, the integral of div(dQ) over each cell for the dQ held in ``work`` (a function in
+    the mixed space, its displacement part zero); dividing by ``area`` (each cell's reference area) gives the
+    cell average. The time stepper's error estimate measures its predictor's error with it."""
+
+    form: object
+    work: object
+    area: np.ndarray
+
+
+def cell_content_change(problem) -> CellContentChange:
+    V0 = compat.scalar_space(problem.domain, "DG", 0)
+    v0 = ufl.TestFunction(V0)
+    work = compat.Function(problem.W)
+    _, dQ = ufl.split(work)
+    form = compat.form(ufl.div(dQ) * v0 * ufl.dx)
+    area = compat.assemble_vector(compat.form(v0 * ufl.dx))
+    cells = area.array.copy()
+    area.destroy()
+    return CellContentChange(form, work, cells)

@@ -188,6 +188,15 @@ class Problem:
 
         return surface_shape(self, self.state.x.array if array is None else array)
 
+    def observables(self, t: float) -> dict:
+        """What history.csv records of the converged state at time t, by column
+        (:class:`app.solvers.stepping.StepRecord`): growth, the loading's mu_bar and applied strain, fluid
+        volume, the surface's wrinkle amplitude and count, stored energy."""
+        amplitude, count = self.surface_shape()
+        return {"growth_mm": self.growth(), "mu_bar": self.loading.mu_bar(t), "fluid_volume": self.fluid_volume(),
+                "applied_strain": self.loading.applied_strain(t), "amplitude_mm": amplitude,
+                "wrinkle_count": count, "energy": self.stored_energy()}
+
     def fluid_volume(self) -> float:
         """Integral of the fluid content s over the reference domain [mm^2 per unit depth]."""
         return compat.assemble_scalar(self._fluid_form, self.comm)
@@ -195,14 +204,6 @@ class Problem:
     def step_influx(self) -> float:
         """Fluid volume that entered through the permeable surface in the current step."""
         return compat.assemble_scalar(self._influx_form, self.comm)
-
-    # --- state updates ---------------------------------------------------------------------
-
-    def accept(self) -> None:
-        """Make the converged (u, dQ) the new state: u_n = u, Q_n += dQ."""
-        a, s = self.w.x.array, self.state.x.array
-        s[self.u_dofs] = a[self.u_dofs]
-        s[self.q_dofs] += a[self.q_dofs]
 
     def dofs(self) -> int:
         return compat.global_size(self.W)

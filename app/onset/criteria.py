@@ -128,3 +128,29 @@ def _hessian(problem, tau: float, keep=None):
 def rate_matrix(problem, tau: float):
     """The analyzer of K with the step tau on the free dofs (criterion "rate" with that tau)."""
     return CRITERIA.get("rate").analyzer(problem, {"tau": tau})
+
+
+class LossOfStability:
+    """The time stepper's diagnosis after a step failed twice in a row for the same reason
+    (:meth:`app.solvers.stepping.TimeStepper._diagnose`): ``check(dt)`` tests the converged state with the
+    "rate" criterion at tau = dt (K as Newton sees it), then, where fluid can move in or out, with the drained
+    criterion, stopping at the first with negative eigenvalues. Returns (what was tested, its negative
+    eigenvalues) for each test run."""
+
+    def __init__(self, problem):
+        self.problem = problem
+
+    def __call__(self, dt: float) -> list[tuple[str, int]]:
+        p, out = self.problem, []
+        for name in ("rate", "drained") if p.diffusion else ("rate",):
+            if name == "drained" and p.permeable_facets() == 0:
+                continue
+            analyzer = CRITERIA.get(name).analyzer(p, {"tau": dt})
+            try:
+                nneg = analyzer.inertia()[0]
+            finally:
+                analyzer.destroy()
+            out.append((f"K with tau = {dt:.3g} s" if name == "rate" else "the drained K", nneg))
+            if nneg > 0:
+                break
+        return out

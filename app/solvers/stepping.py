@@ -15,11 +15,11 @@ cannot know, the history restarts. Below ``time.dt_min`` the run fails with a :c
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
-import ufl
 from mpi4py import MPI
 
 from app import compat
@@ -123,21 +123,51 @@ class Snapshot:
         return cls(state, rate_u, dQ_prev, *(scalars[k] for k in cls.SCALARS))
 
 
-class TimeStepper:
-    """Advances a :class:`app.model.problem.Problem` in time."""
+@dataclass(frozen=True)
+class Evolution:
+    """What the stepper advances, as forms, conditions, index sets and the model's hooks (the stepper reads
+    nothing else; :func:`app.factory.time_stepper` fills it from a problem)."""
 
-    def __init__(self, problem, time: TimeSettings, solver: SolverSettings, log=None, limits=None):
-        self.p = problem
+    energy: Any  # compiled forms of the incremental potential Pi_tau(u, dQ), its residual and Hessian
+    residual: Any
+    hessian: Any
+    bcs: list  # Dirichlet conditions on the unknown
+    w: Any  # the unknown (u, dQ) of the current step (a Function of the mixed space)
+    state: Any  # the converged state (u_n, Q_n), same space
+    u_dofs: np.ndarray  # the mixed space's displacement and flux dofs (local indices)
+    q_dofs: np.ndarray
+    comm: Any
+    content_change: Any  # app.model.operators.CellContentChange: the error estimate's cell averages
+    kinks: tuple  # times where the loading's rate jumps
+    diffusion: bool  # whether fluid moves (tau enters the potential)
+    set_time: Callable[[float, float], None]  # (t, tau): the loading at t for a step of size tau
+    influx: Callable[[], float]  # fluid volume entering through the permeable surface in the current step
+    observables: Callable[[float], dict]  # the converged state's StepRecord columns at time t
+
+
+class TimeStepper:
+    """Advances an :class:`Evolution` in time.
+
+    ``limits``: where a followed branch ends, a callable made once the stepper follows minimizers
+    (:meth:`follow_minimizers`) and returning an object with new_step, failed_attempt, out_of_steps and
+    accepted (:class:`app.onset.contact.ModelLimits`, raising :class:`ModelLimit`); None: a branch is followed
+    without any check. ``check``: the diagnosis of two failed attempts in a row, ``check(dt)`` -> the
+    (what, negative eigenvalues) of each stability test it ran (:class:`app.onset.criteria.LossOfStability`);
+    None: failures are only cut back."""
+
+    def __init__(self, system: Evolution, time: TimeSettings, solver: SolverSettings, log=None, limits=None,
+                 check=None):
+        self.system = system
         self.end = time.end
         self.max_steps = time.max_steps
         self.control = time.step_control()
         self._solver_settings = solver
-        self.solver = NewtonSolver(problem.forms.residual, problem.forms.hessian, problem.bcs, problem.w, solver,
-                                   problem.comm, fields={"u": problem.u_dofs, "q": problem.q_dofs})
+        self.solver = NewtonSolver(system.residual, system.hessian, system.bcs, system.w, solver,
+                                   system.comm, fields={"u": system.u_dofs, "q": system.q_dofs})
         self.log = log or (lambda msg: None)
-        self.kinks = sorted(k for k in problem.loading.kinks() if 0 < k < self.end)
+        self.kinks = sorted(k for k in system.kinks if 0 < k < self.end)
 
-        nu, nq = len(problem.u_dofs), len(problem.q_dofs)
+        nu, nq = len(system.u_dofs), len(system.q_dofs)
         self.rate_u = np.zeros(nu)
         self.dQ_prev = np.zeros(nq)
         self.dt_prev = time.dt_initial
@@ -152,15 +182,11 @@ class TimeStepper:
         self._volume = None  # (t, fluid volume) of the last record seen by at_equilibrium
         self._volume0 = None
         self.uptake_rate = float("nan")  # the last relative uptake rate at_equilibrium computed
-        self._setup_error_form()
         self.minimizing = False  # past an onset with stability.after_onset = "branch": follow_minimizers
         self.energy_rejections = 0  # minimizer solves whose energy ended above the initial guess's
-        # where a followed branch ends: limits(problem) -> app.onset.contact.ModelLimits (new_step,
-        # failed_attempt, out_of_steps, accepted; raising ModelLimit), built once minimizing. None: a branch
-        # is followed without any check (no contact, no inverted cell): a run passes ModelLimits
-        # (app.workflows.run, tests/conftest.time_stepper)
         self._limits_of = limits
-        self.limits = None
+        self.limits = None  # built once minimizing
+        self.check = check
 
     def follow_minimizers(self) -> None:
         """From now on every step minimizes Pi^tau (app.solvers.minimizer.MinimizingNewton): the state past
@@ -169,58 +195,47 @@ class TimeStepper:
             return
         from app.solvers.minimizer import MinimizingNewton
 
-        p, old = self.p, self.solver
-        self.solver = MinimizingNewton(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w,
-                                       self._solver_settings, p.comm)
+        s, old = self.system, self.solver
+        self.solver = MinimizingNewton(s.energy, s.residual, s.hessian, s.bcs, s.w, self._solver_settings, s.comm)
         self.solver.set_counters(old.counters())
         old.destroy()
         self.minimizing = True
-        self.limits = self._limits_of(p) if self._limits_of is not None else None
+        self.limits = self._limits_of() if self._limits_of is not None else None
 
     def relax(self) -> bool:
         """Minimize Pi at the current time from the current state, without advancing: a perturbed state settles
         onto the branch its perturbation points to, before any load increment (whose own residual would
         compete with the perturbation's). Only for problems without diffusion, where tau does not enter;
         False (state unchanged) if the solve fails."""
-        p = self.p
-        if p.diffusion:
+        s = self.system
+        if s.diffusion:
             return False
-        p.set_time(self.t, self.dt_prev)
-        w = p.w.x.array
+        s.set_time(self.t, self.dt_prev)
+        w = s.w.x.array
         w[:] = 0.0
-        w[p.u_dofs] = p.state.x.array[p.u_dofs]
+        w[s.u_dofs] = s.state.x.array[s.u_dofs]
         res = self.solver.solve()
         if res.converged:
-            p.state.x.array[p.u_dofs] = w[p.u_dofs]
+            s.state.x.array[s.u_dofs] = w[s.u_dofs]
         return res.converged
 
     # --- error estimate --------------------------------------------------------------------
 
-    def _setup_error_form(self):
-        p = self.p
-        V0 = compat.scalar_space(p.domain, "DG", 0)
-        v0 = ufl.TestFunction(V0)
-        self._err_fn = compat.Function(p.W)
-        _, e = ufl.split(self._err_fn)
-        self._err_form = compat.form(ufl.div(e) * v0 * ufl.dx)
-        area = compat.assemble_vector(compat.form(v0 * ufl.dx))
-        self._cell_area = area.array.copy()
-        area.destroy()
-
     def _fluid_error(self, dQ_pred: np.ndarray) -> float:
         """Max over cells of |cell average of s - s_pred|."""
-        a = self._err_fn.x.array
+        s, change = self.system, self.system.content_change
+        a = change.work.x.array
         a[:] = 0.0
-        a[self.p.q_dofs] = self.p.w.x.array[self.p.q_dofs] - dQ_pred
-        vec = compat.assemble_vector(self._err_form)
-        local = np.max(np.abs(vec.array / self._cell_area)) if vec.array.size else 0.0
+        a[s.q_dofs] = s.w.x.array[s.q_dofs] - dQ_pred
+        vec = compat.assemble_vector(change.form)
+        local = np.max(np.abs(vec.array / change.area)) if vec.array.size else 0.0
         vec.destroy()
-        return self.p.comm.allreduce(float(local), op=MPI.MAX)
+        return s.comm.allreduce(float(local), op=MPI.MAX)
 
     # --- snapshots (for re-solving from an earlier state) ----------------------------------
 
     def snapshot(self) -> Snapshot:
-        return Snapshot(self.p.state.x.array.copy(), self.rate_u.copy(), self.dQ_prev.copy(), self.dt_prev,
+        return Snapshot(self.system.state.x.array.copy(), self.rate_u.copy(), self.dQ_prev.copy(), self.dt_prev,
                         self.history_valid, self.t, self.step, self.inflow, self.dt_next)
 
     @staticmethod
@@ -229,7 +244,7 @@ class TimeStepper:
         return Snapshot.from_parts(state, rate_u, dQ_prev, scalars)
 
     def restore(self, snap: Snapshot) -> None:
-        self.p.state.x.array[:] = snap.state
+        self.system.state.x.array[:] = snap.state
         self.rate_u[:] = snap.rate_u
         self.dQ_prev[:] = snap.dQ_prev
         self.dt_prev, self.history_valid = snap.dt_prev, snap.history_valid
@@ -240,11 +255,11 @@ class TimeStepper:
         step's (u, dQ), which only the flux output reads before the next step."""
         self.restore(snap)
         self.set_counters(counters)
-        p = self.p
-        w = p.w.x.array
+        s = self.system
+        w = s.w.x.array
         w[:] = 0.0
-        w[p.u_dofs] = snap.state[p.u_dofs]
-        w[p.q_dofs] = snap.dQ_prev
+        w[s.u_dofs] = snap.state[s.u_dofs]
+        w[s.q_dofs] = snap.dQ_prev
 
     def counters(self) -> dict:
         """What a checkpoint needs besides a :class:`Snapshot` to continue identically
@@ -276,21 +291,20 @@ class TimeStepper:
         return dt
 
     def _predict(self, dt: float) -> np.ndarray:
-        """Set problem.w to the predictor; return the predicted flux increment."""
-        p = self.p
+        """Set the unknown to the predictor; return the predicted flux increment."""
+        s = self.system
         r = dt / self.dt_prev if self.history_valid else 0.0
-        u_n = p.state.x.array[p.u_dofs]
+        u_n = s.state.x.array[s.u_dofs]
         dQ_pred = r * self.dQ_prev
-        w = p.w.x.array
+        w = s.w.x.array
         w[:] = 0.0
-        w[p.u_dofs] = u_n + r * self.rate_u
-        w[p.q_dofs] = dQ_pred
+        w[s.u_dofs] = u_n + r * self.rate_u
+        w[s.q_dofs] = dQ_pred
         return dQ_pred
 
     def attempt(self, dt: float):
         """Solve one step of size dt from the current state; returns (newton result, err)."""
-        p = self.p
-        p.set_time(self.t + dt, dt)
+        self.system.set_time(self.t + dt, dt)
         dQ_pred = self._predict(dt)
         res = self.solver.solve()
         if res.converged and self.minimizing:
@@ -321,7 +335,7 @@ class TimeStepper:
             if not res.converged:
                 self.failed_solves += 1
                 failures += 1
-                limit = limits.failed_attempt(self.p.w.x.array, self.t + dt, self.t) if limits is not None else None
+                limit = limits.failed_attempt(self.system.w.x.array, self.t + dt, self.t) if limits is not None else None
                 if res.reason == last_reason and not diagnosed:
                     diagnosed = True
                     self._diagnose(dt, res.reason, failures)
@@ -353,31 +367,19 @@ class TimeStepper:
 
     def _diagnose(self, dt: float, reason: int, failures: int) -> None:
         """After a step failed at 4 dt and again at dt for the same reason: is the last converged state
-        still stable? Two tests (app.solvers.stability): K with the failing step's tau = dt (what Newton
-        sees), and the drained test (any growing perturbation, the fluid free to redistribute; the same
-        as the first when diffusion is off). Negative eigenvalues in either mean the state has lost
-        stability and no smaller step can follow the fundamental path: raise :class:`LostStability`
-        instead of cutting back to dt_min. Both positive definite let the cut-back go on."""
-        from app.model.operators import DrainedHessian, zero_increment_hessian
-        from app.solvers.stability import DrainedOperator, HessianOperator, StabilityAnalyzer
-
-        p, found = self.p, []
-        for criterion in ("rate", "drained") if p.diffusion else ("rate",):
-            if criterion == "drained" and p.permeable_facets() == 0:
-                continue
-            op = (HessianOperator(zero_increment_hessian(p, dt), p.comm) if criterion == "rate" else
-                  DrainedOperator(DrainedHessian(p), p.comm))
-            analyzer = StabilityAnalyzer(op, p.comm)
-            try:
-                nneg = analyzer.inertia()[0]
-            finally:
-                analyzer.destroy()
-            what = f"K with tau = {dt:.3g} s" if criterion == "rate" else "the drained K"
+        still stable? ``check(dt)`` runs the stability tests (K with the failing step's tau = dt, what Newton
+        sees, then the drained test: any growing perturbation, the fluid free to redistribute) until one has
+        negative eigenvalues. Then the state has lost stability and no smaller step can follow the
+        fundamental path: raise :class:`LostStability` instead of cutting back to dt_min. All positive
+        definite let the cut-back go on."""
+        if self.check is None:
+            return
+        found = []
+        for what, nneg in self.check(dt):
             self.log(f"  two failures in a row (SNES reason {reason}): {what} at t = {self.t:.6g} s has {nneg} "
                      f"negative eigenvalue(s)")
             if nneg > 0:
                 found.append(f"{what} has {nneg} negative eigenvalue(s)")
-                break
         if found and not self.minimizing:
             raise LostStability(
                 f"the state lost stability at t = {self.t:.6g} s ({found[0]}; Newton failed {failures} times on "
@@ -407,14 +409,15 @@ class TimeStepper:
         return rate < self.equilibrium_threshold
 
     def _accept(self, dt: float, its: int, err: float) -> StepRecord:
-        p = self.p
+        s = self.system
         if self.minimizing:  # the checks read the displacement dofs only: w's are the step's new ones
-            self._check_limits(p.w.x.array, self.t + dt)
-        influx = p.step_influx()
-        u_old = p.state.x.array[p.u_dofs].copy()
-        p.accept()
-        self.rate_u[:] = p.state.x.array[p.u_dofs] - u_old
-        self.dQ_prev[:] = p.w.x.array[p.q_dofs]
+            self._check_limits(s.w.x.array, self.t + dt)
+        influx = s.influx()
+        w, state = s.w.x.array, s.state.x.array
+        self.rate_u[:] = w[s.u_dofs] - state[s.u_dofs]
+        self.dQ_prev[:] = w[s.q_dofs]
+        state[s.u_dofs] = w[s.u_dofs]  # the new state: u_n = u, Q_n += dQ
+        state[s.q_dofs] += w[s.q_dofs]
         self.dt_prev = dt
         self.t += dt
         self.step += 1
@@ -426,10 +429,8 @@ class TimeStepper:
         return self.record(dt, its, err)
 
     def record(self, dt: float, its: int, err: float) -> StepRecord:
-        p = self.p
-        amplitude, count = p.surface_shape()
-        return StepRecord(self.step, self.t, dt, its, p.growth(), p.loading.mu_bar(self.t), p.fluid_volume(),
-                          self.inflow, p.loading.applied_strain(self.t), err, amplitude, count, p.stored_energy())
+        return StepRecord(self.step, self.t, dt, its, inflow=self.inflow, error_estimate=err,
+                          **self.system.observables(self.t))
 
     def initial_record(self) -> StepRecord:
         return self.record(0.0, 0, float("nan"))

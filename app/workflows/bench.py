@@ -292,6 +292,7 @@ def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], out
                 return ""
             doc = None if result is None else report({comm.size: result})
     if doc is None:
+        logging_setup.get().info(f"bench: interrupted: no bench.json written in {outdir}; rerun the command")
         return None
     text = table(doc) if comm.rank == 0 else ""  # the per-rank memory is gathered on rank 0 only
 

@@ -26,6 +26,13 @@ HOW_TO_CONTINUE = {
 }
 
 
+def no_resume(command: str, resume: str | None) -> None:
+    """``--resume`` belongs to ``run``: the commands that run several directories refuse it with one line
+    saying how they continue."""
+    if resume is not None:
+        raise config.ConfigError("", f"--resume: {HOW_TO_CONTINUE[command]}")
+
+
 def finished(cfg: dict, outdir, solver: str = "2d") -> dict | None:
     """The summary of a finished run of exactly ``cfg`` in ``outdir`` (its config.toml equal to ``cfg``,
     a status in :data:`COMPLETE`, by ``solver``: "2d", or "reduced" for the exact 1D reduction), else None."""

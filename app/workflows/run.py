@@ -17,10 +17,9 @@ from app.io.writes import ResultWriteError
 from app.model.problem import Problem
 from app.model.surface import SurfaceProfiles, surface_profile
 from app.onset.branching import reference_length
-from app.onset.contact import ModelLimits
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
-from app.solvers.stepping import ModelLimit, StepFailure, StepRecord, TimeSettings, TimeStepper
+from app.solvers.stepping import ModelLimit, StepFailure, StepRecord, TimeSettings
 
 ASSUMPTIONS = (
     "material.shear_modulus (gamma_s) defaults to 0.1 MPa: the paper gives only ratios gamma_f/gamma_s",
@@ -139,7 +138,7 @@ class RunLoop:
         with timing.timed("setup"):
             if problem is None:
                 problem = factory.problem(cfg, comm)
-            stepper = TimeStepper(problem, settings.time, settings.solver, log=log.info, limits=ModelLimits)
+            stepper = factory.time_stepper(problem, settings.time, settings.solver, log=log.info)
             tracker = onset_tracker(problem, stepper, settings.stability, log=log.info, detail=detail,
                                     on_first_crossing=lambda crossing: loop.writer.write_mode(problem, crossing),
                                     reference_length=reference_length(cfg))

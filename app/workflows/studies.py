@@ -327,20 +327,46 @@ def listing() -> str:
                      + ", ".join(f"{v:g}" for v in spec.values) for name, spec in STUDIES.items())
 
 
-def sweep_cases(path, param: str, values: list, outdir: Path, overrides: list[str], isomodes: bool = False,
+def sweep_cases(path, param: str, values_text: str, outdir: Path, overrides: list[str], isomodes: bool = False,
                 error_estimate: bool = False) -> list[Case]:
-    """``hydrobuckle sweep``: one case per value of the dotted key ``param`` over the config file at ``path``
-    (its own tables: each case is resolved with the value in place)."""
-    user = config.read(path)
-    config.set_dotted(config.defaults(), param, values[0])  # the key must exist
-    return build_cases(user, param, values, outdir, overrides, isomodes=isomodes, error_estimate=error_estimate)
+    """``hydrobuckle sweep``: one case per value (``values_text``, comma-separated) of the dotted key ``param``
+    over the config file at ``path`` (its own tables: each case is resolved with the value in place). A value
+    the TOML reader or a case's resolution cannot take is a ConfigError naming the file."""
+    values = config.parse_values(values_text)
+    try:
+        user = config.read(path)
+        config.set_dotted(config.defaults(), param, values[0])  # the key must exist
+        return build_cases(user, param, values, outdir, overrides, isomodes=isomodes, error_estimate=error_estimate)
+    except config.ConfigError:
+        raise
+    except ValueError as err:
+        raise config.ConfigError("", f"config file '{path}': {err}") from None
 
 
-def study_cases(name: str, outdir: Path, values: list | None, overrides: list[str],
+def study_cases(name: str | None, outdir: Path, values_text: str | None, overrides: list[str],
                 error_estimate: bool = False, isomodes: bool | None = None) -> tuple[StudySpec, list[Case]]:
+    """``hydrobuckle study NAME``: the study's cases (``values_text``: comma-separated values replacing its
+    defaults); a missing or unknown name is a ConfigError listing the studies."""
+    if name not in STUDIES:
+        raise config.ConfigError("study", ("needs a name" if not name else f"{name!r} is unknown")
+                                 + "; allowed: " + ", ".join(STUDIES))
     spec = STUDIES[name]
-    cases = build_cases({}, spec.param, values or spec.values, outdir, overrides, series=spec.series,
+    values = config.parse_values(values_text) if values_text else spec.values
+    cases = build_cases({}, spec.param, values, outdir, overrides, series=spec.series,
                         scale_mesh_with_film=spec.scale_mesh_with_film,
                         isomodes=spec.isomodes if isomodes is None else isomodes,
                         dotted_base=spec.base, error_estimate=error_estimate)
     return spec, cases
+
+
+def command(cases: list[Case], outdir: Path, comm, title: str, param: str, ranks_per_case: int, force: bool,
+            reduced: bool, start) -> tuple[bool, str]:
+    """``hydrobuckle study`` and ``sweep``: the shared pre-flight of every case, ``start()`` (the command's
+    logging), every case, the tables; whether every case is complete and the line saying so."""
+    from app.workflows import preflight
+
+    preflight.check([c.cfg for c in cases], comm, outdir, [c.label for c in cases], reduced=reduced,
+                    ranks_per_case=ranks_per_case)
+    start()
+    rows = run_study(cases, outdir, comm, title, param, ranks_per_case, force, "reduced" if reduced else "2d")
+    return outcome(rows, outdir)

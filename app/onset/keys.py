@@ -1,0 +1,31 @@
+"""The [stability] keys of the onset tracker (app.onset.tracker.StabilitySettings); ``criterion`` and each
+criterion's parameters come from the registry (app.onset.criteria.CRITERIA) and are put in by app.config."""
+
+from __future__ import annotations
+
+from app.schema import Key, ge, in_closed, in_open, key, one_of
+
+STABILITY: dict[str, Key] = {
+    "enabled": key(bool, True, None, "test K for positive definiteness after every step"),
+    "tolerance": key(float, 1.0e-3, in_open(0.0, 0.5), "relative bracket width of the onset time"),
+    "stop_at_onset": key(bool, True, None, "false: continue on the unbuckled path and record later crossings "
+                         "(the same as after_onset = \"fundamental\")"),
+    "after_onset": key(str, None, one_of("stop", "fundamental", "branch"),
+                       "what follows the onset: stop; continue on the unbuckled (fundamental) path; or follow "
+                       "the buckled branch (docs/postbuckling.md). Unset: from stop_at_onset", optional=True),
+    "imperfection": key(float, 0.01, in_closed(-1.0, 1.0),
+                        "after_onset = branch: the mode's peak surface normal displacement added at the onset, "
+                        "as a fraction of geometry.film_thickness (or mesh.element_size, or a .msh mesh's "
+                        "sqrt(area/cells)); sign = direction, not 0"),
+    "modes": key(int, 3, in_closed(1, 50), "eigenpairs reported at the onset"),
+    "eigen_every": key(int, 0, ge(0), "also compute lambda_min every n steps (0 = only at the onset)"),
+    "surface_check": key(bool, True, None,
+                         "check the permeable surface's short-wave limit every step from the local state: "
+                         "reports where and when it becomes unstable at waves below the mesh "
+                         "(summary.json surface_onset, docs/reduction.md)"),
+    "screening": key(str, "newton", one_of("newton", "exact"),
+                     "per-step test: inertia of the Newton factor (confirmed exactly) or exact K"),
+    "max_crossings": key(int, 20, ge(1), "with stop_at_onset = false: stop after this many"),
+    "error_estimate": key(bool, True, None,
+                          "estimate g_c's discretization error with two coarsened companion runs"),
+}
