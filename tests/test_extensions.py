@@ -1,16 +1,17 @@
-"""Extending hydrobuckle from outside app/: a stability criterion and a material law, each registered by
-test code alone (no edit under app/), go through the config schema, validation, the run and summary.json.
-Each is checked against a built-in path that computes the same thing another way. A toy geometry kind is
-tested the same way in tests/test_geometry_kinds.py."""
+"""Extending hydrobuckle from outside app/: a stability criterion, a material law and a loading, each
+registered by test code alone (no edit under app/), go through the config schema, validation and a run. Each
+is checked against a built-in path that computes the same thing another way. A toy geometry kind is tested
+the same way in tests/test_geometry_kinds.py."""
 
 from __future__ import annotations
 
 import pytest
 import ufl
 from cases import swelling_case
+from conftest import run_to_end
 
-from app import config
-from app.model import material
+from app import config, factory
+from app.model import loading, material
 from app.model.hydrogel import HydrogelLaw
 from app.onset import criteria
 from app.schema import ConfigError, gt, key
@@ -38,6 +39,29 @@ class SlowGel(HydrogelLaw):
     def dissipation(self, dQ, C_n, s_n, tau, p):
         J0, M = p.preswelling, p.mobility
         return ufl.inner(C_n * dQ, dQ) / (2 * tau * J0 ** (1.0 / 3.0) * (M / 2) * s_n)
+
+
+class RateSwelling(loading.Swelling):
+    """A toy loading: the surface chemical potential rises at ``loading.mu_rate`` [MPa/s] from the surface
+    material's mu0 until it reaches ``loading.chemical_potential``, then is held: the built-in swelling ramp
+    with ramp_time = (chemical_potential - mu0) / mu_rate, written another way."""
+
+    name = "rate_swelling"
+    keys = {"chemical_potential": loading.RAMP_KEYS["chemical_potential"],
+            "mu_rate": key(float, 1.0, gt(0), "rate_swelling only: d mu_bar / dt during the rise [MPa/s]")}
+
+    def mu_bar(self, t: float) -> float:
+        return min(self.mu_start + self.params["mu_rate"] * max(t, 0.0), self.params["chemical_potential"])
+
+    def kinks(self) -> list[float]:
+        return [(self.params["chemical_potential"] - self.mu_start) / self.params["mu_rate"]]
+
+
+@pytest.fixture
+def rate_swelling():
+    kind = loading.LOADINGS.register(RateSwelling)
+    yield kind
+    loading.LOADINGS.unregister(kind.name)
 
 
 @pytest.fixture
@@ -88,3 +112,26 @@ def test_a_registered_law_runs_like_the_law_it_restates(slow_gel, shared_tmp, co
     assert toy["status"] == ref["status"] == "buckled"
     assert toy["critical"]["time"] == pytest.approx(ref["critical"]["time"], rel=1e-6)
     assert toy["critical"]["growth_mm"] == pytest.approx(ref["critical"]["growth_mm"], rel=1e-6)
+
+
+def test_a_registered_loading_runs_like_the_ramp_it_restates(rate_swelling, comm):
+    """loading.kind = rate_swelling at mu_rate = (0 - mu0) / 0.8 s is the built-in swelling with ramp_time =
+    0.8 s: the same kink, and at each (fixed) step the same growth, fluid volume and inflow at each, to the
+    roundoff of the two ways mu_bar(t) is written."""
+    with pytest.raises(ConfigError, match="loading.mu_rate"):
+        swelling_case("loading.kind=rate_swelling", "loading.mu_rate=0")
+    base = ("stability.enabled=false", "time.end=1.2", "time.adaptive=false", "time.dt_initial=0.02")
+    mu0 = factory.layer_materials(swelling_case(*base))["film"].mu0
+    assert mu0 < 0.0
+    _, _, toy = run_to_end(swelling_case(*base, "loading.kind=rate_swelling", f"loading.mu_rate={-mu0 / 0.8!r}"),
+                           comm)
+    _, _, ref = run_to_end(swelling_case(*base, "loading.ramp_time=0.8"), comm)
+    # fixed steps: with adaptive ones the proposals read error estimates that carry the roundoff of mu_bar, and
+    # the step ends drift apart (measured: 5e-12 past the kink, 2e-10 at t = 1.2 s)
+    assert [r.time for r in toy] == [r.time for r in ref]
+    assert any(r.time == pytest.approx(0.8, rel=1e-12) for r in toy)  # the toy's kink is a step's end
+    assert len(toy) > 20 and toy[-1].growth_mm > 0.0
+    for column in ("growth_mm", "fluid_volume", "inflow", "mu_bar"):
+        got, want = [getattr(r, column) for r in toy], [getattr(r, column) for r in ref]
+        scale = max(abs(v) for v in want)  # measured serially: at most 5.2e-15 of the column's largest value
+        assert got == pytest.approx(want, rel=0.0, abs=1e-12 * scale), column
