@@ -245,6 +245,12 @@ def same_summary(ref: dict, got: dict, rel: float, counters: bool = True) -> Non
         assert all(close(x, y) for x, y in zip(a["bracket"], b["bracket"]))
         assert [m["wrinkle_count"] for m in a["modes"]] == [m["wrinkle_count"] for m in b["modes"]]
         assert all(close(x["eigenvalue"], y["eigenvalue"], True) for x, y in zip(a["modes"], b["modes"]))
+    a, b = ref.get("surface_onset"), got.get("surface_onset")  # the short-wave check's onset
+    assert (a is None) == (b is None), (a, b)
+    if a is not None:
+        assert a["where"] == b["where"] and a["before_critical"] == b["before_critical"]
+        assert abs(a["time"] - b["time"]) <= rel * a["time"] and abs(a["growth_mm"] - b["growth_mm"]) <= rel * abs(
+            a["growth_mm"])
     _same_final(ref["final"], got["final"], rel)
     _same_postbuckling(ref.get("postbuckling"), got.get("postbuckling"), rel, counters)
 

@@ -51,13 +51,15 @@ def test_surface_state_is_the_constrained_layer_in_equilibrium_with_the_bath():
             assert chemical_potential(film, F[i], s[i]) == pytest.approx(mu_bar, abs=1e-10)
 
 
+W05 = ["geometry.film_thickness=0.05", "geometry.length=0.3", "mesh.element_size=0.01", "mesh.film_layers=4",
+       "stability.error_estimate=false", "reduced.beside_2d=false", "output.fields=false", "output.plot=false"]
+
+
 def test_2d_bilayer_reports_the_surface_onset_at_the_bath_potential_of_the_critical_state(shared_tmp, comm):
     """w = 0.05 mm on a 0.3 mm strip: the surface onset within 1e-4 s of the closed-form instant (measured
     4e-5: the quadratic between steps), before the 2D wrinkling onset, and within 2e-4 s of the 1D
     reduction's converged short-wave onset."""
-    cfg = config.load("configs/bilayer.toml", [
-        "geometry.film_thickness=0.05", "geometry.length=0.3", "mesh.element_size=0.01", "mesh.film_layers=4",
-        "stability.error_estimate=false", "reduced.beside_2d=false", "output.fields=false", "output.plot=false"])
+    cfg = config.load("configs/bilayer.toml", W05)
     s = simulate(cfg, shared_tmp / "w05", comm, progress=False)
     so = s["surface_onset"]
     t_c = _critical_time(cfg)
@@ -90,3 +92,26 @@ def test_2d_homogeneous_tube_surface_onset_equals_the_reduction(shared_tmp, comm
     assert so["time"] != pytest.approx(_critical_time(cfg), abs=1e-4)
     r = np.hypot(*so["where"])
     assert r == pytest.approx(cfg["geometry"]["outer_radius"] - 0.2 - 0.02, rel=1e-3)
+
+
+def test_a_resumed_run_keeps_the_surface_onset_found_before_its_checkpoint(shared_tmp, comm):
+    """The w = 0.05 mm strip stopped (as an interrupt stops it) three steps after its surface onset and
+    resumed: summary.json reports the same surface onset as the run never stopped (the checkpoint carries
+    it; the check does not look again)."""
+    from app.io import checkpoint
+
+    cfg = config.load("configs/bilayer.toml", W05 + ["output.checkpoint_every=1"])
+    full = simulate(cfg, shared_tmp / "full", comm, progress=False)
+    so = full["surface_onset"]
+    assert so["before_critical"]
+    rows = np.genfromtxt(shared_tmp / "full" / "history.csv", delimiter=",", names=True)
+    stop = int(rows["step"][rows["time"] >= so["time"]][0]) + 3
+    assert stop + 3 < full["steps"]
+    part = shared_tmp / "part"
+    assert simulate(cfg, part, comm, progress=False, stop_after=stop)["status"] == "interrupted"
+    resumed = simulate(cfg, part, comm, progress=False, resume=checkpoint.check(part, cfg, comm))
+    got = resumed["surface_onset"]
+    assert got.keys() == so.keys()
+    for k, v in so.items():  # bit for bit serially; on 2 ranks MUMPS' roundoff (measured 5e-16)
+        assert got[k] == (pytest.approx(v, rel=1e-12) if isinstance(v, float) else v), k
+    assert resumed["critical"]["time"] == pytest.approx(full["critical"]["time"], rel=1e-10)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
 
 from app.onset.bisection import Bisection
 from app.onset.policy import AfterCrossing, CrossingPolicy
@@ -261,42 +260,32 @@ class OnsetTracker:
         return {"count": self.count, "crossings": list(self.crossings), "exact_tests": self.analyzer.tests,
                 "screen": self.screen.export_state(), "limits": dict(self.limits),
                 "branch": {**self.branch.export_state(), "restabilized": list(self.restabilized)}
-                if self.branch is not None else None,
-                "ranks": self.problem.comm.size,
-                "surface": {"onset": self.surface_onset,
-                            "history": [(t, g, m, c.tolist()) for t, g, m, c in self.surface.history]}
-                if self.surface is not None else None}
+                if self.branch is not None else None, "surface_onset": self.surface_onset}
 
     def checkpoint_state(self, ref) -> dict:
         """This tracker in a checkpoint's meta (JSON; snapshots as ``ref(snapshot)``): the negative count, the
-        crossings so far, the screen, the other criteria's verdicts and the branch."""
+        crossings so far, the screen, the other criteria's verdicts, the branch and the surface check's onset
+        (its per-step history is per facet of a rank's partition: a resumed check starts it afresh)."""
         state = self.export_state()
         return {"count": state["count"], "exact_tests": state["exact_tests"], "limits": state["limits"],
                 "branch": state["branch"], "crossings": [c.checkpoint_state() for c in state["crossings"]],
-                "screen": self.screen.checkpoint_state(ref)}
+                "screen": self.screen.checkpoint_state(ref), "surface_onset": state["surface_onset"]}
 
     def restore_checkpoint(self, state: dict, snapshots: list) -> None:
         """The state :meth:`checkpoint_state` wrote, with its snapshots restored."""
         self.import_state({"count": state["count"], "exact_tests": state["exact_tests"],
                            "crossings": [Crossing.from_checkpoint(c) for c in state["crossings"]],
                            "screen": StabilityScreen.from_checkpoint(state["screen"], snapshots),
-                           "limits": state.get("limits", {}), "branch": state.get("branch")})
-
-    def comm_size_matches(self, state: dict) -> bool:
-        return state.get("ranks") == self.problem.comm.size
+                           "limits": state.get("limits", {}), "branch": state.get("branch"),
+                           "surface_onset": state.get("surface_onset")})  # written since 2026-12 only
 
     def import_state(self, state: dict) -> None:
         self.count, self.crossings = state["count"], list(state["crossings"])
         self.analyzer.tests = state["exact_tests"]
         self.screen.import_state(state["screen"])
         self.limits = dict(state.get("limits", {}))
-        surface = state.get("surface")
-        if surface and self.surface is not None:
-            self.surface_onset = surface["onset"]
-            history = [(t, g, m, np.asarray(c, dtype=float)) for t, g, m, c in surface["history"]]
-            # the columns are per facet of this rank: a resume on another partition starts the check afresh
-            fits = all(len(c) == len(self.surface.facets) for *_, c in history)
-            self.surface.history = history if fits and self.comm_size_matches(state) else []
+        if self.surface is not None:
+            self.surface_onset = state.get("surface_onset")
         branch = state.get("branch")
         if branch and self.branch is not None:
             self.branch.import_state(branch)
