@@ -100,6 +100,16 @@ def dof_coordinates(V) -> np.ndarray:
     return V.tabulate_dof_coordinates()[:, 0].copy()
 
 
+def dof_points(V) -> np.ndarray:
+    """(x, y) of each local dof of a scalar space (collapsed sub-spaces included)."""
+    return V.tabulate_dof_coordinates()[:, :2].copy()
+
+
+def facet_midpoints(domain, facets: np.ndarray) -> np.ndarray:
+    """(x, y) of the midpoint of each given local facet."""
+    return dmesh.compute_midpoints(domain, domain.topology.dim - 1, facets)[:, :2]
+
+
 def matrix_csr(A):
     """(indptr, indices, values) of an assembled serial PETSc matrix."""
     return A.getValuesCSR()

@@ -374,6 +374,12 @@ def validate(cfg: dict) -> None:
     stab = cfg["stability"]
     if stab["after_onset"] == "stop" and not stab["stop_at_onset"]:
         raise ConfigError("stability.after_onset", "= 'stop' contradicts stability.stop_at_onset = false; set one of them")
+    if stab["creases"] and not (kind.creases and loading.fluid_frozen):
+        able = [lo.name for lo in _loadings() if lo.fluid_frozen]
+        raise ConfigError("stability.creases", f"= true needs a geometry kind with a symmetry line for the trial "
+                          f"crease and a loading that moves no fluid; allowed: geometry.kind = "
+                          + " or ".join(repr(k.name) for k in _kinds() if k.creases)
+                          + " with loading.kind = " + " or ".join(map(repr, able)))
     if stab["imperfection"] == 0.0:
         raise ConfigError("stability.imperfection", "= 0 is out of range; allowed: [-1, 1] except 0 (the sign picks "
                           "the direction along the mode)")

@@ -164,6 +164,17 @@ class GeometryKind:
                               f"by {factor:g}; allowed: a multiple of {factor ** -exponent:g}")
         return value, {"mesh.element_size": value, "mesh.film_layers": int(round(layers))}
 
+    #: a trial crease (stability.creases, app.onset.creases) can be placed: crease_setup and crease_line
+    creases: ClassVar[bool] = False
+
+    def crease_setup(self, cfg: dict, comm, tip_size: float, tip_radius: float) -> GeometrySetup:
+        """The geometry meshed for a trial crease on a symmetry line of the body (:attr:`creases`)."""
+        raise NotImplementedError
+
+    def crease_line(self, cfg: dict) -> float:
+        """x of the symmetry line (held in x) the trial crease sits on."""
+        raise NotImplementedError
+
     def estimate(self, cfg: dict) -> dict | None:
         """The mesh size from the keys alone, without meshing (:func:`structured_size`); None if unknown
         (a user's file)."""

@@ -15,6 +15,7 @@ if TYPE_CHECKING:
 class Bilayer(GeometryKind):
     name = "bilayer"
     provides = frozenset({"drive"})  # a displacement loading moves the right edge
+    creases = True  # a trial crease at the left edge (app.onset.creases)
     mesh_defaults = {"element_size": 0.004, "film_layers": 8}
     film_element_fraction = 0.4
     keys = {
@@ -45,6 +46,26 @@ class Bilayer(GeometryKind):
         tm = tagged_mesh(comm, geo["length"], geo["substrate_thickness"], geo["film_thickness"],
                          mesh["element_size"], mesh["film_layers"], mesh["substrate_grading"],
                          film_grading=mesh["film_grading"], msh_path=msh_path)
+        return self._setup(tm, geo)
+
+    def crease_setup(self, cfg: dict, comm, tip_size: float, tip_radius: float) -> GeometrySetup:
+        """The bilayer meshed for a trial crease at its left edge (a symmetry line: u_x = 0), graded from
+        ``tip_size`` within ``tip_radius`` of the top left corner (:mod:`meshes.crease`)."""
+        from app.geometry.tagged import mesh_from_builder
+        from meshes import crease
+
+        geo, mesh = cfg["geometry"], cfg["mesh"]
+        tm = mesh_from_builder(comm, "crease", crease.add_model, geo["length"], geo["substrate_thickness"],
+                               geo["film_thickness"], mesh["element_size"], tip_size, tip_radius,
+                               geo["film_thickness"] / mesh["film_layers"])
+        return self._setup(tm, geo)
+
+    def crease_line(self, cfg: dict) -> float:
+        """x of the symmetry line a trial crease sits on (the left edge)."""
+        return 0.0
+
+    @staticmethod
+    def _setup(tm, geo: dict) -> GeometrySetup:
         return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},
                              {"left": "roller_x", "right": "roller_x", "bottom": "roller_y", "top": "permeable"},
                              wrinkles="along", plot_band=6 * geo["film_thickness"],

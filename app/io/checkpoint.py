@@ -54,8 +54,10 @@ PROFILE_MEMBERS = {"growth_mm": "profile_growth", "time": "profile_time", "posit
 
 # Keys a resumed run may change: they decide when a run ends or what it writes, never a row before the
 # checkpoint or the continuation after it (time.end: only above the checkpoint's time, see check()); reduced.*
-# only sets the 1D counterpart computed after the run; stability.surface_check adds a summary entry only.
-FREE_KEYS = ("output", "time.end", "time.max_steps", "stability.error_estimate", "stability.surface_check", "reduced")
+# only sets the 1D counterpart computed after the run; stability.surface_check adds a summary entry only, and
+# the trial crease (stability.creases and its parameters) is computed after the run on a mesh of its own.
+FREE_KEYS = ("output", "time.end", "time.max_steps", "stability.error_estimate", "stability.surface_check", "reduced",
+             "stability.creases", "stability.crease_size", "stability.crease_resolution")
 
 
 class CheckpointError(config.ConfigError):

@@ -37,6 +37,9 @@ class Loading:
     keys: ClassVar[dict[str, Key]] = {}  # loading.* keys it reads
     needs: ClassVar[frozenset[str]] = frozenset()  # what the geometry kind must provide
     surface_term: ClassVar[bool] = True  # the permeable surface carries mu_bar dQ.n
+    #: no fluid moves (conditions() gives flux_open None): a state at load t has no history, which the trial
+    #: crease of stability.creases needs (app.onset.creases)
+    fluid_frozen: ClassVar[bool] = False
 
     def __init__(self, params: dict, *, mu_start: float, end_time: float, drive: Drive | None = None):
         """``params``: this loading's keys; ``mu_start``: mu0 of the material under the permeable surface
@@ -120,6 +123,7 @@ class Compression(RampedSurface):
     keys = {**RAMP_KEYS, "compression_strain": key(float, 0.1, in_open(0.0, 0.9), "compression loading only")}
     needs = frozenset({"drive"})
     surface_term = False
+    fluid_frozen = True
 
     def applied_strain(self, t: float) -> float:
         return self.params["compression_strain"] * min(t / self.end_time, 1.0)

@@ -1,0 +1,159 @@
+"""The energetic crease onset (docs/creases.md): the load at which a creased surface has less energy than the
+flat one, by the trial crease of fixed size of Hong, Zhao & Suo (2009).
+
+A crease is subcritical: the flat state stays linearly stable past it (the Hessian's inertia cannot see it),
+but a state folded into self-contact has lower energy. The trial crease sits on a symmetry line of the body
+(the bilayer's left edge, held in x): the permeable surface's points within the reference length ``c`` of
+that line are moved onto it, x = 0, and are free to slide along it (frictionless contact with their mirror
+image: the crease's two walls). Between those points and the rest of the surface the body folds into a
+crease of depth about c, its tip at the surface point on the symmetry line. Every other condition and the
+load are those of the flat state. The energy difference
+
+    dPi(t) = Pi(creased state at load t) - Pi(flat state at load t)
+
+scales as mu c^2 f(load) while c is small against the layer; it is positive at no load and changes sign at
+the crease onset, independently of c (Hong, Zhao & Suo: nominal strain 0.354 for an incompressible
+neo-Hookean half-space in plane-strain compression; the linear, Biot onset is 0.456).
+
+The creased state is reached from the flat one by moving the crease's points to the symmetry line in
+sub-steps, each solved by the minimizing Newton (energy line search, inertia correction: the fold passes
+through states where K is indefinite); a sub-step that fails is halved. The load enters through the
+problem's loading: only loadings without fluid motion (``compression``: the fluid frozen, the energy path
+independent) have a flat state at every load without a history, which this test needs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from app import compat
+from app.solvers.minimizer import MinimizingNewton
+from app.solvers.newton import NewtonSolver, SolverSettings
+
+
+class CreaseFailed(RuntimeError):
+    """The creased state could not be reached (one line: where and why)."""
+
+
+@dataclass
+class Trial:
+    """One trial at load time t: the energies of the flat and creased states and the creased state's shape."""
+
+    time: float
+    applied_strain: float
+    flat_energy: float
+    creased_energy: float
+    penetration: float  # the deepest crossing of the symmetry line by the free surface [mm] (0: none)
+    depth: float  # the crease tip's depth below the flat surface [mm]
+    substeps: int
+
+    @property
+    def difference(self) -> float:
+        return self.creased_energy - self.flat_energy
+
+
+FLAT_STRAIN_STEP = 0.02  # the flat state is followed in load steps of at most this applied strain
+MIN_SUBSTEP = 1.0e-3  # the smallest fraction of the crease's motion one sub-step may take
+
+
+class CreaseTrial:
+    """The trial crease of length ``length`` [mm, reference] at the symmetry line x = ``line`` of a problem
+    whose loading moves no fluid."""
+
+    def __init__(self, problem, length: float, settings: SolverSettings, substeps: int = 20, line: float = 0.0):
+        p = self.problem = problem
+        if p.diffusion:
+            raise ValueError("a trial crease needs a loading without fluid motion (loading.kind = compression)")
+        self.length, self.line, self.substeps = length, line, substeps
+        fdim = p.domain.topology.dim - 1
+        surface = np.unique(np.concatenate([p.tm.facets(g) for g in p.geo.facets_with_role("permeable")]))
+        mid = compat.facet_midpoints(p.domain, surface.astype(np.int32))
+        facets = surface[np.abs(mid[:, 0] - line) < length].astype(np.int32)
+        if p.comm.allreduce(len(facets)) == 0:
+            raise ValueError(f"no surface facet within {length:g} mm of the symmetry line x = {line:g}")
+        self.bc, self.target = compat.dirichlet_function_on_facets(p.W.sub(0).sub(0), facets, fdim)
+        V0, self._x_dofs = compat.collapse(p.W.sub(0).sub(0))
+        _, self._y_dofs = compat.collapse(p.W.sub(0).sub(1))  # the same nodes in the same order
+        self._points = compat.dof_points(V0)
+        self._X = self._points[:, 0]
+        # the surface's nodes: the body's top (a flat surface, as the bilayer's)
+        top = p.comm.allreduce(float(self._points[:, 1].max()) if len(self._points) else -np.inf, op=_max())
+        self._on_surface = np.isclose(self._points[:, 1], top, rtol=0.0, atol=1e-9 * max(1.0, abs(top)))
+        self.flat_solver = NewtonSolver(p.forms.residual, p.forms.hessian, p.bcs, p.w, settings, p.comm)
+        self.crease_solver = MinimizingNewton(p.forms.energy, p.forms.residual, p.forms.hessian,
+                                              p.bcs + [self.bc], p.w, settings, p.comm)
+        self._flat = p.w.x.array.copy()  # the last flat state and its load time
+        self._flat_time = 0.0
+
+    def flat_state(self, t: float) -> float:
+        """Solve the flat state at load time t (followed from the last one in small load steps); its energy."""
+        p = self.problem
+        lo = p.loading
+        strain_change = abs(lo.applied_strain(t) - lo.applied_strain(self._flat_time))
+        steps = max(1, int(np.ceil(strain_change / FLAT_STRAIN_STEP)))
+        p.w.x.array[:] = self._flat
+        for tk in np.linspace(self._flat_time, t, steps + 1)[1:]:
+            p.set_time(float(tk), 1.0)
+            res = self.flat_solver.solve()
+            if not res.converged:
+                raise CreaseFailed(f"the flat state did not converge at t = {tk:.6g} s (SNES reason {res.reason})")
+        self._flat, self._flat_time = p.w.x.array.copy(), t
+        return self._energy()
+
+    def _energy(self) -> float:
+        p = self.problem
+        p.state.x.array[:] = p.w.x.array  # the stored energy is the state's (no fluid moves: Q stays 0)
+        return p.stored_energy()
+
+    def trial(self, t: float) -> Trial:
+        """The flat and creased states at load time t and their energies."""
+        p = self.problem
+        flat = self.flat_state(t)
+        strain = p.loading.applied_strain(t)
+        X = self._X
+        flat_x = p.w.x.array[self._x_dofs]  # the flat state's u_x (the crease's points start from it)
+        s, ds, taken = 0.0, 1.0 / self.substeps, 0
+        while s < 1.0:
+            step = min(ds, 1.0 - s)
+            before = p.w.x.array.copy()
+            # the crease's points move from the flat state's position to the symmetry line: u_x = line - X
+            self.target.x.array[:] = (1 - (s + step)) * flat_x + (s + step) * (self.line - X)
+            res = self.crease_solver.solve()
+            if res.converged:
+                s += step
+                taken += 1
+                continue
+            p.w.x.array[:] = before
+            ds = step / 2
+            if ds < MIN_SUBSTEP:
+                raise CreaseFailed(f"the trial crease did not close at t = {t:.6g} s (applied strain {strain:.4g}): "
+                                   f"{s:.3f} of its motion done, the minimizing Newton failed with sub-steps of "
+                                   f"{2 * ds:.2g} (SNES reason {res.reason})")
+        creased = self._energy()
+        penetration, depth = self._shape(p.w.x.array, self._flat)
+        p.w.x.array[:] = self._flat
+        return Trial(t, strain, flat, creased, penetration, depth, taken)
+
+    def _shape(self, creased: np.ndarray, flat: np.ndarray) -> tuple[float, float]:
+        """(the deepest crossing of the symmetry line by the surface, the depth of the crease's tip below the
+        flat state's surface) [mm]."""
+        comm, on = self.problem.comm, self._on_surface
+        x = self._X[on] + creased[self._x_dofs][on]
+        y = self._points[on, 1] + creased[self._y_dofs][on]
+        y_flat = self._points[on, 1] + flat[self._y_dofs][on]
+        crossing = comm.allreduce(float(np.max(self.line - x)) if x.size else -np.inf, op=_max())
+        lowest = -comm.allreduce(float(-np.min(y)) if y.size else -np.inf, op=_max())
+        flat_top = comm.allreduce(float(np.max(y_flat)) if y.size else -np.inf, op=_max())
+        return max(crossing, 0.0), flat_top - lowest
+
+    def destroy(self) -> None:
+        self.flat_solver.destroy()
+        self.crease_solver.destroy()
+
+
+def _max():
+    from mpi4py import MPI
+
+    return MPI.MAX

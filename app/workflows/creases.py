@@ -1,0 +1,210 @@
+"""``stability.creases``: the energetic crease onset of a run's config, with its error bar (docs/creases.md).
+
+The trial crease (:class:`app.onset.creases.CreaseTrial`) is computed on meshes of its own, graded towards
+the crease's tip: three of them, with ``stability.crease_resolution`` / 4, / 2 and x 1 elements along the
+crease. On each, the load where the creased state's energy falls below the flat state's is bracketed and
+then found by regula falsi; the three onsets give the answer by Richardson extrapolation and its error bar.
+The coarsest level scans the whole run (time 0 to time.end); each finer one starts from the coarser answer.
+"""
+
+from __future__ import annotations
+
+import math
+
+from app import config, factory, geometry, logging_setup
+from app.onset.creases import CreaseFailed, CreaseTrial
+from app.solvers.newton import SolverSettings
+from app.workflows.convergence import richardson
+
+SCAN_POINTS = 8  # the coarsest level's load grid over the run
+BISECTIONS = 2  # the bracket is halved this often before regula falsi (its far end may be far past the onset)
+FALSI_STEPS = 3  # Illinois regula falsi steps after that
+FAR = 4.0  # a negative end this many times larger than the positive one is not interpolated towards
+MARCH = 0.03  # a finer level brackets its onset from the coarser one's in steps of this fraction of it
+LEVEL_RATIO = 2  # crease_resolution halves from one level to the next coarser one
+TIP_RADIUS = 1.5  # the finest elements reach this many crease lengths around the tip
+
+
+def crease_length(cfg: dict) -> float:
+    geo = cfg["geometry"]
+    return cfg["stability"]["crease_size"] * (geo["substrate_thickness"] + geo["film_thickness"])
+
+
+def add_creases(summary: dict, cfg: dict, comm) -> None:
+    """The pipeline step: summary["creases"] (and its log line); a trial that cannot be completed is
+    reported there, the run's other results kept."""
+    log = logging_setup.get()
+    try:
+        block = crease_onset(cfg, comm, log.info)
+    except CreaseFailed as err:
+        log.warning(f"creases: {err}")
+        summary["creases"] = {"error": str(err)}
+        return
+    block["first"] = _first(block["onset"], summary.get("critical"))
+    summary["creases"] = block
+    log.info("creases: " + describe(block, summary.get("critical")))
+
+
+def crease_onset(cfg: dict, comm, log=lambda msg: None) -> dict:
+    """The crease onset on every level and the extrapolated answer (a dict for summary.json)."""
+    kind = geometry.kind_of(cfg)
+    c = crease_length(cfg)
+    finest = cfg["stability"]["crease_resolution"]
+    resolutions = [finest // LEVEL_RATIO ** k for k in (2, 1, 0)]
+    settings = SolverSettings.from_config(cfg)
+    end = cfg["time"]["end"]
+    levels, found = [], None
+    for resolution in resolutions:
+        setup = kind.crease_setup(cfg, comm, c / resolution, TIP_RADIUS * c)
+        problem = factory.problem(cfg, comm, setup=setup)
+        trial = CreaseTrial(problem, c, settings, line=kind.crease_line(cfg))
+        surface = problem.materials[setup.material_under("permeable", comm)]
+        mu = getattr(surface, config.law(cfg).stiffness)  # the energies are reported per mu c^2
+        try:
+            level = _level(trial, found, end, mu * c * c, log)
+        finally:
+            trial.destroy()
+        level.update(resolution=resolution, tip_size_mm=c / resolution, cells=problem.cells())
+        levels.append(level)
+        log(f"creases: {resolution} elements along the trial crease ({problem.cells()} cells): "
+            + (f"onset at t = {level['time']:.6g} s (applied strain {level['applied_strain']:.5g})"
+               if level["time"] is not None else "no onset up to time.end"))
+        found = level["time"]
+        if found is None:
+            break
+    onset = None
+    if found is not None:
+        times = [lv["time"] for lv in levels]
+        rich = richardson(times, LEVEL_RATIO)
+        t, err = rich["converged"], rich["errors"][-1]
+        strain_rate = levels[-1]["applied_strain"] / levels[-1]["time"]  # the compression ramp is linear in t
+        onset = {"time": t, "time_error": err, "applied_strain": strain_rate * t,
+                 "applied_strain_error": abs(strain_rate) * err, "order": rich["order"],
+                 "position_mm": [kind.crease_line(cfg), _top(cfg)]}
+    return {"onset": onset, "crease_size_mm": c, "levels": levels,
+            "method": "trial crease of fixed size on the symmetry line (Hong, Zhao & Suo 2009)",
+            "penetration_mm": max((e["penetration_mm"] for lv in levels for e in lv["trials"]
+                                   if "penetration_mm" in e and e["difference"] > 0), default=0.0)}
+
+
+def _top(cfg: dict) -> float:
+    geo = cfg["geometry"]
+    return geo["substrate_thickness"] + geo["film_thickness"]
+
+
+def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, log) -> dict:
+    """One mesh's onset: a bracket where the energy difference changes sign (the whole run scanned, or
+    marching from ``guess``), halved twice, then Illinois regula falsi (halving while the negative end is
+    far below zero against the positive one). A load where the crease cannot be
+    held at its size (the solve fails: far past the onset, the crease runs away) counts as past the onset."""
+    trials = []
+
+    def difference(t: float) -> float:
+        try:
+            tr = trial.trial(t)
+        except CreaseFailed as err:
+            log(f"  t = {t:.6g} s: {err}; counted as past the onset")
+            trials.append({"time": t, "failed": str(err)})
+            return -math.inf
+        trials.append({"time": t, "applied_strain": tr.applied_strain, "difference": tr.difference,
+                       "difference_per_mu_c2": tr.difference / scale, "penetration_mm": tr.penetration,
+                       "depth_mm": tr.depth, "substeps": tr.substeps})
+        log(f"  t = {t:.6g} s, applied strain {tr.applied_strain:.5g}: creased - flat energy = "
+            f"{tr.difference / scale:+.5f} mu c^2, crease depth {tr.depth:.4g} mm")
+        return tr.difference
+
+    try:
+        bracket = _bracket(difference, guess, end)
+    except CreaseFailed:
+        failed = [tr["failed"] for tr in trials if "failed" in tr]
+        if failed and len(failed) == len(trials):  # not one trial completed: that is the reason
+            raise CreaseFailed(failed[0]) from None
+        raise
+    time = None
+    if bracket is not None:
+        (a, fa), (b, fb) = bracket
+        for _ in range(BISECTIONS):
+            t = 0.5 * (a + b)
+            ft = difference(t)
+            (a, fa), (b, fb) = ((t, ft), (b, fb)) if ft > 0 else ((a, fa), (t, ft))
+        side = None
+        for _ in range(FALSI_STEPS):
+            if not math.isfinite(fb) or -fb > FAR * fa:  # the far end is far past the onset: halve instead
+                t = 0.5 * (a + b)
+            else:
+                t = b - fb * (b - a) / (fb - fa)
+            ft = difference(t)
+            if ft > 0:
+                a, fa = t, ft
+                if side == "a":
+                    fb *= 0.5
+                side = "a"
+            else:
+                b, fb = t, ft
+                if side == "b":
+                    fa *= 0.5
+                side = "b"
+        time = a - fa * (b - a) / (fb - fa) if math.isfinite(fb) else 0.5 * (a + b)
+    strain = trial.problem.loading.applied_strain(time) if time is not None else None
+    return {"time": time, "applied_strain": strain, "trials": trials}
+
+
+def _bracket(difference, guess: float | None, end: float):
+    """((t, dPi > 0), (t, dPi <= 0)) or None if the difference stays positive to ``end``: a scan of the run
+    (no ``guess``), or a march from ``guess`` in steps of MARCH of it, up or down as its sign says."""
+    if guess is None:
+        prev = None
+        for t in [end * k / SCAN_POINTS for k in range(1, SCAN_POINTS + 1)]:
+            f = difference(t)
+            if f <= 0:
+                return (prev or _positive_below(difference, t, end)), (t, f)
+            prev = (t, f)
+        return None
+    step = MARCH * guess
+    t, f = guess, difference(guess)
+    if f <= 0:
+        return _positive_below(difference, t, end, step), (t, f)
+    while t < end:
+        prev = (t, f)
+        t = min(end, t + step)
+        f = difference(t)
+        if f <= 0:
+            return prev, (t, f)
+    return None
+
+
+def _positive_below(difference, t: float, end: float, step: float | None = None):
+    """A load below t where the difference is positive, marching down from t."""
+    while True:
+        t = t - step if step is not None else t / 2
+        if t < end * 1e-3:
+            raise CreaseFailed("the trial crease has less energy than the flat state at every load tried, down to "
+                               f"t = {end * 1e-3:.3g} s: no onset to bracket")
+        f = difference(t)
+        if f > 0:
+            return t, f
+
+
+def _first(onset: dict | None, critical: dict | None) -> str | None:
+    """Which comes first: "crease" or "wrinkle" (None: neither within the run)."""
+    if onset is None:
+        return "wrinkle" if critical else None
+    if critical is None or onset["time"] < critical["time"]:
+        return "crease"
+    return "wrinkle"
+
+
+def describe(block: dict, critical: dict | None) -> str:
+    onset = block["onset"]
+    if onset is None:
+        return "no trial crease has less energy than the flat state up to time.end"
+    line = (f"a crease has less energy than the flat surface from t = {onset['time']:.5g} +- "
+            f"{onset['time_error']:.2g} s (applied strain {onset['applied_strain']:.4g} +- "
+            f"{onset['applied_strain_error']:.2g})")
+    if critical is None:
+        return line + "; no wrinkling onset within the run: the crease comes first"
+    rel = critical["time"] / onset["time"] if onset["time"] > 0 else math.inf
+    return line + (f", before the wrinkling onset at t = {critical['time']:.5g} s: the crease comes first"
+                   if block["first"] == "crease" else
+                   f", after the wrinkling onset at t = {critical['time']:.5g} s ({1 / rel:.3g} x its time): "
+                   "wrinkles come first")
