@@ -26,14 +26,9 @@ STABILITY: dict[str, Key] = {
     "screening": key(str, "newton", one_of("newton", "exact"),
                      "per-step test: inertia of the Newton factor (confirmed exactly) or exact K"),
     "max_crossings": key(int, 20, ge(1), "with stop_at_onset = false: stop after this many"),
-    "creases": key(bool, False, None,
-                   "also find the energetic crease onset: the load where a trial crease on the body's symmetry "
-                   "line has less energy than the flat state (docs/creases.md; bilayer under compression)"),
-    "crease_size": key(float, 0.05, in_open(0.0, 0.5),
-                       "the trial crease's contact length as a fraction of the body's thickness"),
-    "crease_resolution": key(int, 32, in_closed(8, 256),
-                             "elements along the trial crease on the finest of the three meshes of its error "
-                             "bar (each coarser one: half as many)"),
+    "creases": key(bool, False, None, "also find the energetic crease onset (docs/creases.md)"),
+    "crease_size": key(float, 0.05, in_open(0.0, 0.5), "the trial crease's length / the body's thickness"),
+    "crease_resolution": key(int, 32, in_closed(8, 256), "elements along the trial crease (finest of 3 meshes)"),
     "error_estimate": key(bool, True, None,
                           "estimate g_c's discretization error with two coarsened companion runs"),
 }
