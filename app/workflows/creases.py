@@ -18,7 +18,8 @@ from app.workflows.convergence import richardson
 
 SCAN_POINTS = 8  # the coarsest level's load grid over the run
 BISECTIONS = 2  # the bracket is halved this often before regula falsi (its far end may be far past the onset)
-FALSI_STEPS = 3  # Illinois regula falsi steps after that
+FALSI_STEPS = 6  # at most this many Illinois regula falsi steps after that, until the bracket is within
+TOLERANCE = 2e-4  # this fraction of its load
 FAR = 4.0  # a negative end this many times larger than the positive one is not interpolated towards
 MARCH = 0.03  # a finer level brackets its onset from the coarser one's in steps of this fraction of it
 LEVEL_RATIO = 2  # crease_resolution halves from one level to the next coarser one
@@ -127,22 +128,24 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
             t = 0.5 * (a + b)
             ft = difference(t)
             (a, fa), (b, fb) = ((t, ft), (b, fb)) if ft > 0 else ((a, fa), (t, ft))
-        side = None
+        side, ga, gb = None, fa, fb  # g: Illinois' weights (halved on a retained end); f: the true values
         for _ in range(FALSI_STEPS):
-            if not math.isfinite(fb) or -fb > FAR * fa:  # the far end is far past the onset: halve instead
+            if b - a <= TOLERANCE * b:
+                break
+            if not math.isfinite(gb) or -gb > FAR * ga:  # the far end is far past the onset: halve instead
                 t = 0.5 * (a + b)
             else:
-                t = b - fb * (b - a) / (fb - fa)
+                t = b - gb * (b - a) / (gb - ga)
             ft = difference(t)
             if ft > 0:
-                a, fa = t, ft
+                a, fa, ga = t, ft, ft
                 if side == "a":
-                    fb *= 0.5
+                    gb *= 0.5
                 side = "a"
             else:
-                b, fb = t, ft
+                b, fb, gb = t, ft, ft
                 if side == "b":
-                    fa *= 0.5
+                    ga *= 0.5
                 side = "b"
         time = a - fa * (b - a) / (fb - fa) if math.isfinite(fb) else 0.5 * (a + b)
     strain = trial.problem.loading.applied_strain(time) if time is not None else None
