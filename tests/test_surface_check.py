@@ -96,8 +96,8 @@ def test_2d_homogeneous_tube_surface_onset_equals_the_reduction(shared_tmp, comm
 
 def test_a_resumed_run_keeps_the_surface_onset_found_before_its_checkpoint(shared_tmp, comm):
     """The w = 0.05 mm strip stopped (as an interrupt stops it) three steps after its surface onset and
-    resumed: summary.json reports the same surface onset as the run never stopped (the checkpoint carries
-    it; the check does not look again)."""
+    resumed: summary.json reports the surface onset the stopped run found (the checkpoint carries it; the
+    check does not look again), which is the uninterrupted run's."""
     from app.io import checkpoint
 
     cfg = config.load("configs/bilayer.toml", W05 + ["output.checkpoint_every=1"])
@@ -108,10 +108,20 @@ def test_a_resumed_run_keeps_the_surface_onset_found_before_its_checkpoint(share
     stop = int(rows["step"][rows["time"] >= so["time"]][0]) + 3
     assert stop + 3 < full["steps"]
     part = shared_tmp / "part"
-    assert simulate(cfg, part, comm, progress=False, stop_after=stop)["status"] == "interrupted"
+    stopped = simulate(cfg, part, comm, progress=False, stop_after=stop)
+    assert stopped["status"] == "interrupted" and stopped["surface_onset"] is not None
     resumed = simulate(cfg, part, comm, progress=False, resume=checkpoint.check(part, cfg, comm))
+    # the resumed run reports the onset its checkpoint carries, exactly
+    assert resumed["surface_onset"] == stopped["surface_onset"]
+    # and the uninterrupted run's: bit for bit serially; on 2 ranks MUMPS' roundoff (measured 5e-16), and the
+    # place only serially: the strip's surface state is uniform along it, so on 2 ranks which facet of that tie
+    # is reported changes from run to run (measured: x = 0.005 and 0.165 mm)
     got = resumed["surface_onset"]
     assert got.keys() == so.keys()
-    for k, v in so.items():  # bit for bit serially; on 2 ranks MUMPS' roundoff (measured 5e-16)
-        assert got[k] == (pytest.approx(v, rel=1e-12) if isinstance(v, float) else v), k
+    for k, v in so.items():
+        if k == "where" and comm.size > 1:
+            assert got[k][1] == pytest.approx(v[1], rel=1e-12)  # on the surface: y alone
+            continue
+        numeric = isinstance(v, float) or (isinstance(v, list) and all(isinstance(x, float) for x in v))
+        assert got[k] == (pytest.approx(v, rel=1e-12) if numeric else v), k
     assert resumed["critical"]["time"] == pytest.approx(full["critical"]["time"], rel=1e-10)
