@@ -206,8 +206,7 @@ def describe(block: dict, critical: dict | None) -> str:
             f"{onset['applied_strain_error']:.2g})")
     if critical is None:
         return line + "; no wrinkling onset within the run: the crease comes first"
-    rel = critical["time"] / onset["time"] if onset["time"] > 0 else math.inf
-    return line + (f", before the wrinkling onset at t = {critical['time']:.5g} s: the crease comes first"
-                   if block["first"] == "crease" else
-                   f", after the wrinkling onset at t = {critical['time']:.5g} s ({1 / rel:.3g} x its time): "
-                   "wrinkles come first")
+    if block["first"] == "crease":
+        return line + f", before the wrinkling onset at t = {critical['time']:.5g} s: the crease comes first"
+    return line + (f", after the wrinkling onset at t = {critical['time']:.5g} s "
+                   f"({onset['time'] / critical['time']:.3g} x its time): wrinkles come first")
