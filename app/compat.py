@@ -110,6 +110,18 @@ def facet_midpoints(domain, facets: np.ndarray) -> np.ndarray:
     return dmesh.compute_midpoints(domain, domain.topology.dim - 1, facets)[:, :2]
 
 
+def cell_midpoints(domain, cells: np.ndarray) -> np.ndarray:
+    """(x, y) of the midpoint of each given local cell."""
+    return dmesh.compute_midpoints(domain, domain.topology.dim, np.asarray(cells, np.int32))[:, :2]
+
+
+def global_indices(V, local: np.ndarray) -> np.ndarray:
+    """Global numbers of local (owned or ghost) scalar dofs of V."""
+    imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+    local = np.asarray(local, np.int64)
+    return imap.local_to_global((local // bs).astype(np.int32)).astype(np.int64) * bs + local % bs
+
+
 def matrix_csr(A):
     """(indptr, indices, values) of an assembled serial PETSc matrix."""
     return A.getValuesCSR()

@@ -32,14 +32,18 @@ def problem(cfg: dict, comm, setup: geometry.GeometrySetup | None = None) -> Pro
     materials = layer_materials(cfg, sorted(set(setup.layers.values())))
     surface = setup.material_under("permeable", comm)
     loading = Loading.from_config(cfg, mu_start=materials[surface].mu0, drive=setup.drive)
-    return Problem(comm, setup, materials, loading, Discretization.from_config(cfg))
+    p = Problem(comm, setup, materials, loading, Discretization.from_config(cfg))
+    stab = cfg.get("stability", {})
+    if stab.get("contact"):
+        p.enable_contact(stab["contact_stiffness"])
+    return p
 
 
 def evolution(p: Problem) -> Evolution:
     """What the time stepper advances of a problem: its forms, conditions, index sets and hooks."""
     return Evolution(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w, p.state, p.u_dofs, p.q_dofs,
                      p.comm, cell_content_change(p), tuple(p.loading.kinks()), p.diffusion, p.set_time,
-                     p.step_influx, p.observables)
+                     p.step_influx, p.observables, p.contact)
 
 
 def time_stepper(p: Problem, time: TimeSettings, solver: SolverSettings, log=None, limits: bool = True,

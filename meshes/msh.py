@@ -47,7 +47,7 @@ def merge(path: str | Path) -> tuple[dict[str, int], dict[str, int]] | str:
     if types - {QUAD}:  # outside the cell groups
         return (f"contains non-quadrilateral cells (gmsh element types {sorted(types)}); "
                 "hydrobuckle's RTCF flux needs quadrilaterals (recombine the mesh)")
-    return check_cells(names[0]) or names
+    return check_cells(names[0], names[1]) or names
 
 
 def refine(times: int) -> None:
@@ -83,12 +83,14 @@ def _at(p) -> str:
     return f"({p[0]:.6g}, {p[1]:.6g})"
 
 
-def check_cells(cell_groups: dict[str, int]) -> str | None:
+def check_cells(cell_groups: dict[str, int], facet_groups: dict[str, int] | None = None) -> str | None:
     """A sentence naming the first cell that is unusable, or None: nodes off the plane z = 0, cells that
     are degenerate or not convex (a negative Jacobian at a corner), cells oriented against the rest of
     the mesh (inverted: clockwise among counter-clockwise ones, or the reverse; a mesh consistently
     clockwise is fine), and non-conforming interfaces (a node inside another cell's edge, or two
-    distinct nodes at one point: cell groups meshed separately and not joined)."""
+    distinct nodes at one point: cell groups meshed separately and not joined). Distinct nodes at one
+    point that all lie on named facet groups are a slit (a crack's two faces, each a boundary), not an
+    error."""
     etags, enodes, groups, xyz = _cells(cell_groups)
     if len(etags) == 0:
         return "has no quadrilateral cells in its cell groups " + ", ".join(map(repr, cell_groups))
@@ -119,10 +121,20 @@ def check_cells(cell_groups: dict[str, int]) -> str | None:
                 f"(centre {_at(xy[i].mean(axis=0))}): its nodes run {'clockwise' if neg[i] else 'counter-clockwise'}"
                 f" unlike the other {int(len(etags) - flipped.sum())} (negative Jacobian); reorient it "
                 "(gmsh: Mesh > Reverse, or gmsh.model.mesh.reverse)")
-    return _check_conforming(etags, enodes, groups, xyz[:, :2], tol)
+    return _check_conforming(etags, enodes, groups, xyz[:, :2], tol, _facet_group_nodes(facet_groups or {}))
 
 
-def _check_conforming(etags, enodes, groups, xy, tol) -> str | None:
+def _facet_group_nodes(facet_groups: dict[str, int]) -> set[int]:
+    """Node tags of the segments of the named facet groups of the current model."""
+    out: set[int] = set()
+    for tag in facet_groups.values():
+        for ent in gmsh.model.getEntitiesForPhysicalGroup(1, tag):
+            for nodes in gmsh.model.mesh.getElements(1, ent)[2]:
+                out.update(int(n) for n in nodes)
+    return out
+
+
+def _check_conforming(etags, enodes, groups, xy, tol, named: set[int] = frozenset()) -> str | None:
     edges = np.sort(np.stack([enodes, np.roll(enodes, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
     owner = np.repeat(np.arange(len(etags)), 4)
     uniq, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
@@ -158,9 +170,10 @@ def _check_conforming(etags, enodes, groups, xy, tol) -> str | None:
     # two distinct boundary nodes at one point: groups meshed separately, not joined
     key = np.round(xy[bnodes] / tol).astype(np.int64)
     _, first, cnt = np.unique(key, axis=0, return_index=True, return_counts=True)
-    if (cnt > 1).any():
-        j = int(first[np.argmax(cnt > 1)])
+    for j in first[cnt > 1]:
         same = bnodes[(key == key[j]).all(axis=1)]
+        if all(int(n) in named for n in same):  # a slit: both faces are named boundaries
+            continue
         cells = [node_cell[int(n)] for n in same[:2]]
         return (f"is not conforming: nodes {int(same[0])} and {int(same[1])} are distinct but both at "
                 f"{_at(xy[same[0]])} (cells {etags[cells[0]]} and {etags[cells[1]]}, groups "

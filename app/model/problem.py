@@ -15,6 +15,7 @@ import ufl
 
 from app import compat
 from app.geometry import GeometrySetup
+from app.model.contact import SurfaceContact
 from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.loading import BoundaryConditions, Loading
 from app.model.material import Material
@@ -76,7 +77,12 @@ class Problem:
                          self.dx_coupling)
         self.forms = CompiledForms(self.pot)
         self.bcs, self._driven = self._boundary_conditions(loading.conditions(self.geo.boundaries))
+        self.contact = None  # the surface's self-contact term (app.model.contact.SurfaceContact), if on
         self._observables()
+
+    def enable_contact(self, kappa: float) -> None:
+        """Add the traction-free surface's self-contact penalty (interface stiffness kappa mu / h) to Pi."""
+        self.contact = SurfaceContact(self, kappa)
 
     # --- setup helpers ---------------------------------------------------------------------
 
@@ -109,7 +115,7 @@ class Problem:
                                                               self.tm.facets(bc.driven.group), fdim)
             bcs.append(dbc)
         if bc.flux_open is not None:
-            no_flux = np.setdiff1d(compat.exterior_facets(self.domain), self._facets(bc.flux_open))
+            no_flux = np.setdiff1d(compat.exterior_facets(self.domain), self.facets_of(bc.flux_open))
         else:  # diffusion switched off: every flux dof is zero, s stays s0
             imap = self.domain.topology.index_map(fdim)
             no_flux = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
@@ -126,11 +132,12 @@ class Problem:
         bc = self._conditions
         if bc.flux_open is None:
             return 0
-        f = self._facets(bc.flux_open)
+        f = self.facets_of(bc.flux_open)
         imap = self.domain.topology.index_map(self.domain.topology.dim - 1)
         return self.comm.allreduce(int(np.count_nonzero(f < imap.size_local)))
 
-    def _facets(self, groups) -> np.ndarray:
+    def facets_of(self, groups) -> np.ndarray:
+        """Local facets (owned and ghost) of the given facet groups."""
         tm = self.tm
         return np.unique(np.concatenate([tm.facets(g) for g in groups])) if groups else np.empty(0, np.int32)
 
@@ -139,7 +146,7 @@ class Problem:
         the same mesh) wherever the loading fixes a component: held, and with ``driven`` also the driven
         boundary. The stability tests of other spaces use them: which dofs are fixed, not their values."""
         bc, fdim = self._conditions, self.domain.topology.dim - 1
-        bcs = [compat.dirichlet_zero_on_facets(Wu.sub(comp), self._facets(groups), fdim)[0]
+        bcs = [compat.dirichlet_zero_on_facets(Wu.sub(comp), self.facets_of(groups), fdim)[0]
                for comp, groups in enumerate(bc.held) if groups]
         if driven and bc.driven is not None:
             bcs.append(compat.dirichlet_zero_on_facets(Wu.sub(bc.driven.component), self.tm.facets(bc.driven.group),
@@ -193,9 +200,20 @@ class Problem:
         (:class:`app.solvers.stepping.StepRecord`): growth, the loading's mu_bar and applied strain, fluid
         volume, the surface's wrinkle amplitude and count, stored energy."""
         amplitude, count = self.surface_shape()
-        return {"growth_mm": self.growth(), "mu_bar": self.loading.mu_bar(t), "fluid_volume": self.fluid_volume(),
-                "applied_strain": self.loading.applied_strain(t), "amplitude_mm": amplitude,
-                "wrinkle_count": count, "energy": self.stored_energy()}
+        out = {"growth_mm": self.growth(), "mu_bar": self.loading.mu_bar(t), "fluid_volume": self.fluid_volume(),
+               "applied_strain": self.loading.applied_strain(t), "amplitude_mm": amplitude,
+               "wrinkle_count": count, "energy": self.stored_energy()}
+        if self.contact is not None:  # with self-contact: the surface length in contact, the zones, the
+            # deepest contact's reference place and its penetration (the penalty's gap)
+            c = self.contact
+            state = c.state(self.state.x.array)
+            zones = c.penalty.zones(state)
+            deepest = int(state.nodes[np.argmin(state.gaps)]) if len(state.nodes) else None
+            out["extra"] = {"contact_length_mm": c.penalty.contact_length(state), "creases": len(zones),
+                            "contact_x_mm": float(c.penalty.X[deepest, 0]) if deepest is not None else float("nan"),
+                            "contact_y_mm": float(c.penalty.X[deepest, 1]) if deepest is not None else float("nan"),
+                            "penetration_mm": float(-state.gaps.min()) if len(state.gaps) else 0.0}
+        return out
 
     def fluid_volume(self) -> float:
         """Integral of the fluid content s over the reference domain [mm^2 per unit depth]."""

@@ -16,6 +16,7 @@ import ufl
 from mpi4py import MPI
 
 from app import compat
+from app.model.contact import GAP_LIMIT
 from app.model.kinematics import deformation_gradient
 from app.model.surface import boundary_displacement, shape_of
 from app.solvers.stepping import ModelLimit
@@ -28,6 +29,10 @@ class Limit:
     status: str
     where: tuple[float, float]
     detail: str
+    consequence: str = "the model has no contact and no inverted elements, the branch cannot be followed further"
+
+
+OVERRUN = "the contact penalty cannot hold this state, the branch cannot be followed further"
 
 
 def _segments_cross(p: np.ndarray, closed: bool) -> tuple[int, int] | None:
@@ -99,6 +104,54 @@ class InversionCheck:
         return Limit("inverted", where, f"an element inverts (det F = {jmin:.3g}) at ({where[0]:.4g}, {where[1]:.4g}) mm")
 
 
+def contact_summary(problem, rows: list[dict]) -> dict:
+    """summary.json's ``creases`` block of a run with self-contact: the first state in contact (time, growth,
+    applied strain, the deepest contact's reference place), the largest penetration of any recorded
+    state, and the zones of the last state (each: its nodes' reference x and y range and its length)."""
+    c = problem.contact
+    touching = [r for r in rows if float(r.get("contact_length_mm") or 0.0) > 0.0]
+    first = None
+    if touching:
+        r = touching[0]
+        first = {"time": r["time"], "growth_mm": r["growth_mm"], "applied_strain": r["applied_strain"],
+                 "position_mm": [r["contact_x_mm"], r["contact_y_mm"]]}
+    state = c.state(problem.state.x.array)
+    zones = []
+    for nodes in c.penalty.zones(state):
+        X = c.penalty.X[nodes]
+        zones.append({"x_mm": [float(X[:, 0].min()), float(X[:, 0].max())],
+                      "y_mm": [float(X[:, 1].min()), float(X[:, 1].max())],
+                      "length_mm": float(np.sum(c.penalty.tributary[nodes]))})
+    return {"contact": "penalty", "contact_stiffness": c.kappa, "first_contact": first,
+            "max_penetration_mm": max((float(r.get("penetration_mm") or 0.0) for r in rows), default=0.0),
+            "zones": zones}
+
+
+def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
+    """With self-contact on: a state whose surface crosses itself where the penalty holds no pair (a node
+    pushed through beyond the pairing's reach), or penetrates deeper than GAP_LIMIT of its element."""
+    c = problem.contact
+    state = c.state(array)
+    pen = c.penalty
+    if len(state.nodes):
+        depth = -state.gaps / pen.tributary[state.nodes]
+        k = int(np.argmax(depth))
+        if depth[k] > GAP_LIMIT:
+            where = tuple(float(v) for v in pen.X[state.nodes[k]])
+            return Limit("contact", where, f"the contact penalty is overrun near ({where[0]:.4g}, {where[1]:.4g}) mm:"
+                                           f" penetration {depth[k]:.3g} of the element (limit {GAP_LIMIT:g}); raise "
+                                           "stability.contact_stiffness")
+    crossing = surface_contact(problem, array)
+    if crossing is None:
+        return None
+    held = pen.X[np.unique(np.concatenate([state.nodes, pen.segments[state.segments].reshape(-1)]))] \
+        if len(state.nodes) else np.empty((0, 2))
+    if len(held) and np.min(np.linalg.norm(held - np.asarray(crossing.where), axis=1)) <= 2 * pen.seg_length.max():
+        return None  # the penalty's own small overlap where the surface is in contact
+    return Limit("contact", crossing.where, crossing.detail + ", where the contact penalty holds no pair (the "
+                 "surface passed through itself in one step: a shorter step or a stiffer penalty)", OVERRUN)
+
+
 class ModelLimits:
     """Where a followed branch ends: both checks of an array (a converged state or a failed step's last
     iterate), and the rule for failed attempts. The :class:`~app.solvers.stepping.TimeStepper` builds one
@@ -115,11 +168,15 @@ class ModelLimits:
         self._folded: Limit | None = None  # the limit a failed attempt of the current step reached
 
     def __call__(self, array: np.ndarray) -> Limit | None:
+        if self.p.contact is not None:  # with self-contact the surface may touch itself, not pass through
+            return self.inversion(array) or penalty_overrun(self.p, array)
         return self.inversion(array) or surface_contact(self.p, array)
 
-    def _of(self, array: np.ndarray) -> Limit | None:
+    def _of(self, array: np.ndarray, iterate: bool = False) -> Limit | None:
         if not np.all(np.isfinite(array[self.p.u_dofs])):
             return None
+        if iterate and self.p.contact is not None:  # an iterate may overrun the penalty; a state may not
+            return self.inversion(array)
         return self(array)
 
     def new_step(self) -> None:
@@ -128,7 +185,7 @@ class ModelLimits:
     def failed_attempt(self, array: np.ndarray, t_try: float, t: float) -> Limit | None:
         """The limit a failed attempt's last iterate reaches (for the log line), or None; ModelLimit when an
         earlier attempt of this step reached one too."""
-        limit = self._of(array)
+        limit = self._of(array, iterate=True)
         if limit is not None:
             if self._folded is not None:
                 raise ModelLimit(limit, t_try, accepted=t)

@@ -68,7 +68,7 @@ class CreaseTrial:
             raise ValueError("a trial crease needs a loading without fluid motion (loading.kind = compression)")
         self.length, self.line, self.substeps = length, line, substeps
         fdim = p.domain.topology.dim - 1
-        surface = np.unique(np.concatenate([p.tm.facets(g) for g in p.geo.facets_with_role("permeable")]))
+        surface = p.facets_of(p.geo.facets_with_role("permeable"))
         mid = compat.facet_midpoints(p.domain, surface.astype(np.int32))
         facets = surface[np.abs(mid[:, 0] - line) < length].astype(np.int32)
         if p.comm.allreduce(len(facets)) == 0:

@@ -53,10 +53,10 @@ class MinimizerVerdict:
 class MinimizingNewton(NewtonSolver):
     """Energy-decreasing, inertia-corrected Newton on Pi^tau (see the module docstring)."""
 
-    def __init__(self, energy, residual, hessian, bcs, w, settings: SolverSettings, comm, fields=None):
+    def __init__(self, energy, residual, hessian, bcs, w, settings: SolverSettings, comm, fields=None, extra=None):
         settings = dataclasses.replace(settings, line_search="bt", max_it=ITERATION_FACTOR * settings.max_it,
                                        factorization="cholesky", linear="direct")
-        super().__init__(residual, hessian, bcs, w, settings, comm, fields)
+        super().__init__(residual, hessian, bcs, w, settings, comm, fields, extra)
         self.energy_form = energy
         self.snes.setObjective(self._objective)
         self.rtol = settings.rtol
@@ -72,7 +72,16 @@ class MinimizingNewton(NewtonSolver):
     def _objective(self, snes, x):
         with timing.timed("assembly"):
             self._sync_solution(x)
-            return compat.assemble_scalar(self.energy_form, self.comm)
+            return self.energy(x.array)
+
+    def energy(self, owned_values=None) -> float:
+        """Pi at ``w`` (or at the owned values given, already in ``w``): the energy form plus the extra
+        term (self-contact)."""
+        value = compat.assemble_scalar(self.energy_form, self.comm)
+        if self.extra is not None:
+            value += self.extra.energy(compat.function_vector(self.w).array if owned_values is None
+                                       else owned_values)
+        return value
 
     def _factor_negatives(self, ksp) -> int:
         ksp.getPC().setUp()
@@ -128,7 +137,7 @@ class MinimizingNewton(NewtonSolver):
         x = compat.function_vector(self.w)
         compat.set_dirichlet_values(x, self.bcs)
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-        self.last.energy_start = compat.assemble_scalar(self.energy_form, self.comm)
+        self.last.energy_start = self.energy(x.array)
         res = super().solve()
         reason = PETSc.SNES.ConvergedReason
         if not res.converged and res.reason == reason.DIVERGED_LINE_SEARCH:
@@ -138,7 +147,7 @@ class MinimizingNewton(NewtonSolver):
             # hides the decrease near the minimizer): the iterate is short of the tolerance, finish it
             res = self._polish(res)
         if res.converged:
-            self.last.energy_end = compat.assemble_scalar(self.energy_form, self.comm)
+            self.last.energy_end = self.energy()
             if self.last.negatives:
                 self.saddles += 1
         return res

@@ -56,9 +56,16 @@ class NewtonSolver:
     """SNES (newtonls) on R(w) = 0 with Jacobian K, in place on the function ``w``.
 
     ``fields`` ({"u": dofs, "q": dofs}, local indices in w's space) are the blocks of the iterative
-    solver's field-split preconditioner; the direct solver does not need them."""
+    solver's field-split preconditioner; the direct solver does not need them.
 
-    def __init__(self, residual, hessian, bcs, w, settings: SolverSettings, comm, fields: dict | None = None):
+    ``extra`` is a term of the energy that is not a form (the surface's self-contact,
+    :class:`app.model.contact.SurfaceContact`): ``extra.terms(owned_values, hessian)`` gives its energy,
+    gradient and Hessian blocks in global dof numbers, the same on every rank; each rank adds the rows it
+    owns, outside the Dirichlet dofs (whose rows and columns stay those of the conditions). Its Hessian
+    couples surface dofs that no cell couples: the matrix takes new nonzeros where contact begins."""
+
+    def __init__(self, residual, hessian, bcs, w, settings: SolverSettings, comm, fields: dict | None = None,
+                 extra=None):
         self.residual_form, self.hessian_form = residual, hessian
         self.bcs, self.w, self.comm = bcs, w, comm
         self.A = compat.create_matrix(hessian)
@@ -69,6 +76,14 @@ class NewtonSolver:
         self._x_prev, self._dx = self.b.duplicate(), self.b.duplicate()  # the last iterate, the update taken
         self._bc_dofs = compat.owned_bc_dofs(bcs, w.function_space)
         self._lifting = True
+        self.extra = extra
+        if extra is not None:
+            self.A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+            self.A.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, False)
+            self.A.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATIONS, True)
+            held = compat.global_indices(w.function_space, self._bc_dofs)
+            self._held = np.unique(np.concatenate(comm.allgather(held)))
+            self._rows = self.A.getOwnershipRange()
         linear = settings.linear
         options = {
             "snes_type": "newtonls",
@@ -143,6 +158,17 @@ class NewtonSolver:
             self._sync_solution(x)
             compat.assemble_residual_into(b, self.residual_form, self.hessian_form, self.bcs, x,
                                           lifting=self._lifting)
+            if self.extra is not None:
+                terms = self.extra.terms(x.array, hessian=False)
+                rows = self._free_rows(terms.grad_dofs)
+                keep = rows >= 0
+                b.array[rows[keep] - self._rows[0]] += terms.grad[keep]
+
+    def _free_rows(self, dofs: np.ndarray) -> np.ndarray:
+        """Global dofs this rank owns and no condition holds; -1 (PETSc skips it) elsewhere."""
+        lo, hi = self._rows
+        keep = (dofs >= lo) & (dofs < hi) & ~np.isin(dofs, self._held)
+        return np.where(keep, dofs, -1).astype(PETSc.IntType)
 
     def _needs_lifting(self, x: PETSc.Vec) -> bool:
         """Whether the initial guess misses the Dirichlet values (then the residual needs the lifting
@@ -212,6 +238,13 @@ class NewtonSolver:
     def _jacobian(self, snes, x, J, P):
         with timing.timed("assembly"):
             compat.assemble_matrix_into(J, self.hessian_form, self.bcs)
+            if self.extra is not None:
+                terms = self.extra.terms(x.array)
+                for dofs, H in terms.blocks:
+                    cols = np.where(np.isin(dofs, self._held), -1, dofs).astype(PETSc.IntType)
+                    J.setValues(self._free_rows(dofs), cols, H, addv=PETSc.InsertMode.ADD_VALUES)
+                if terms.blocks:
+                    J.assemble()
 
     def solve(self) -> NewtonResult:
         """Solve from the current ``w`` as initial guess; ``w`` holds the result."""
@@ -228,9 +261,11 @@ class NewtonSolver:
             reason = -100
         its = self.snes.getIterationNumber()
         self.last_iterations = its
-        if its >= 1:
+        if its >= 1 and self.extra is None:
             # every option has been read once the linear solver was set up (MUMPS reads its controls at
-            # the first factorization, field-split its blocks' at the first PCSetUp)
+            # the first factorization, field-split its blocks' at the first PCSetUp). With an extra term the
+            # matrix gains nonzeros where contact begins, and PETSc then makes a new factor, which reads
+            # them again: they stay until destroy()
             self._options.clear()
         self.linear_iterations += self.snes.getLinearSolveIterations()
         if reason > 0:

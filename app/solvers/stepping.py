@@ -68,8 +68,7 @@ class ModelLimit(StepFailure):
         when = (f"at t = {t:.6g} s" if accepted is None else
                 f"in the Newton iterates of two attempts of the step after t = {accepted:.6g} s (the last one to "
                 f"t = {t:.6g} s; the accepted state at {accepted:.6g} s passed the checks)")
-        super().__init__(f"{limit.detail} {when}: the model has no contact and no inverted elements, "
-                         f"the branch cannot be followed further")
+        super().__init__(f"{limit.detail} {when}: {limit.consequence}")
 
 
 class LostStability(StepFailure):
@@ -143,6 +142,7 @@ class Evolution:
     set_time: Callable[[float, float], None]  # (t, tau): the loading at t for a step of size tau
     influx: Callable[[], float]  # fluid volume entering through the permeable surface in the current step
     observables: Callable[[float], dict]  # the converged state's StepRecord columns at time t
+    extra: Any = None  # an energy term that is not a form (self-contact; NewtonSolver's ``extra``), or None
 
 
 class TimeStepper:
@@ -163,7 +163,8 @@ class TimeStepper:
         self.control = time.step_control()
         self._solver_settings = solver
         self.solver = NewtonSolver(system.residual, system.hessian, system.bcs, system.w, solver,
-                                   system.comm, fields={"u": system.u_dofs, "q": system.q_dofs})
+                                   system.comm, fields={"u": system.u_dofs, "q": system.q_dofs},
+                                   extra=system.extra)
         self.log = log or (lambda msg: None)
         self.kinks = sorted(k for k in system.kinks if 0 < k < self.end)
 
@@ -196,7 +197,8 @@ class TimeStepper:
         from app.solvers.minimizer import MinimizingNewton
 
         s, old = self.system, self.solver
-        self.solver = MinimizingNewton(s.energy, s.residual, s.hessian, s.bcs, s.w, self._solver_settings, s.comm)
+        self.solver = MinimizingNewton(s.energy, s.residual, s.hessian, s.bcs, s.w, self._solver_settings, s.comm,
+                                       extra=s.extra)
         self.solver.set_counters(old.counters())
         old.destroy()
         self.minimizing = True

@@ -39,10 +39,10 @@ def add_creases(summary: dict, cfg: dict, comm) -> None:
         block = crease_onset(cfg, comm, log.info)
     except CreaseFailed as err:
         log.warning(f"creases: {err}")
-        summary["creases"] = {"error": str(err)}
+        summary.setdefault("creases", {})["error"] = str(err)
         return
     block["first"] = _first(block["onset"], summary.get("critical"))
-    summary["creases"] = block
+    summary.setdefault("creases", {}).update(block)
     log.info("creases: " + describe(block, summary.get("critical")))
 
 

@@ -14,9 +14,11 @@ from app import factory, interrupt, logging_setup, timing
 from app.io import checkpoint
 from app.io.output import OutputSettings, ResultWriter, versions
 from app.io.writes import ResultWriteError
+from app.model.contact import COLUMNS as CONTACT_COLUMNS
 from app.model.problem import Problem
 from app.model.surface import SurfaceProfiles, surface_profile
 from app.onset.branching import reference_length
+from app.onset.contact import contact_summary
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
 from app.solvers.stepping import ModelLimit, StepFailure, StepRecord, TimeSettings
@@ -81,6 +83,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     problem, stepper, tracker, writer = loop.problem, loop.stepper, loop.tracker, loop.writer
     summary = summarize(status if status == "interrupted" else tracker.status(status), message, writer.rows[-1],
                         problem, stepper, tracker, settings, cfg, time.perf_counter() - wall0)
+    if problem.contact is not None:
+        summary["creases"] = contact_summary(problem, writer.rows)
     if resume:  # provenance: steps and counters cover the whole run, wall_time_s this part only
         summary["resumed_from"] = {"step": resume.meta["step"], "time": resume.meta["t"],
                                    "ranks": resume.meta["ranks"]}
@@ -134,6 +138,7 @@ class RunLoop:
         log = logging_setup.get()
         detail = log.info if progress else log.debug
         columns = StepRecord.COLUMNS + (OnsetTracker.COLUMNS if settings.stability.enabled else ())
+        columns += CONTACT_COLUMNS if cfg["stability"].get("contact") else ()
         writer = None if resume else ResultWriter(outdir, comm, cfg, settings.output, columns=columns)
         with timing.timed("setup"):
             if problem is None:

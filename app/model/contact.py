@@ -1,0 +1,305 @@
+"""Self-contact of the traction-free surface as a term of the incremental potential (docs/creases.md).
+
+The surface (every boundary facet whose role holds no displacement: permeable, impermeable, free) is a
+set of segments between P1 nodes. A node i that has passed through a segment (a, b) of the surface that
+does not contain it, by at most ``reach`` times that segment's reference length, is penalized by
+
+    E_c = sum_i  kappa mu / 2  g_i^2,    g_i = (x_i - x_a) . n_ab  < 0
+
+with x the deformed positions, n_ab the segment's outward unit normal and mu the largest shear modulus of
+the layers (out-of-plane depth 1 mm, like every 2D energy here). With l_i the node's tributary reference
+length (the local element size h) this is an interface of stiffness kappa mu / h: the contact pressure is
+p = kappa mu |g| / l, so the penetration |g| = p l / (kappa mu) is a fraction p / (kappa mu) of an
+element, and it vanishes with the mesh. Every node is checked against every segment (each side of a
+contact is both slave and master), so the term is symmetric between the two faces.
+
+The term is a function of the surface nodes' displacements only; :class:`SelfContact` evaluates its
+value, gradient and exact Hessian (the Gauss-Newton part plus g times the curvature of g) on the gathered
+surface. What the fluid does in contact: nothing changes. The permeable surface stays at the bath's
+chemical potential where it touches itself: the walls of a crease or fold still bound a film of the
+bath (a gel's surface is never sealed by a touching gel surface: both are the same solvent), and the
+contact zones are short against the diffusion length, so the flux boundary condition is left as it is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from app import compat
+
+REACH = 0.5  # a node is paired with a segment it has passed by at most this times the segment's length
+OVERLAP = 1e-3  # a segment's projection range [0, 1] is widened by this at each end (the joints overlap)
+
+# the two rotations of the plane by +-90 degrees
+_R = np.array([[0.0, -1.0], [1.0, 0.0]])
+
+
+@dataclass
+class ContactState:
+    """What the penalty sees at one state: its energy, the active pairs and their gaps."""
+
+    energy: float
+    nodes: np.ndarray  # (P,) slave node of each active pair
+    segments: np.ndarray  # (P,) master segment of each pair
+    gaps: np.ndarray  # (P,) g < 0 [mm]
+    coefficient: np.ndarray  # (P,) s in [0, 1]: where on the segment
+
+
+def _gap_derivatives(p: np.ndarray, a: np.ndarray, b: np.ndarray):
+    """g = (p - a) . n(a, b) (n: right-hand unit normal of b - a), its gradient (6,) and Hessian (6, 6) in
+    z = (p, a, b), for one pair."""
+    t, d = b - a, p - a
+    L2 = t @ t
+    L = np.sqrt(L2)
+    c = t[0] * d[1] - t[1] * d[0]
+    g = -c / L
+    Rt, Rd = _R @ t, _R @ d
+    g_t = Rd / L + c * t / L**3  # dg/dt
+    g_d = -Rt / L  # dg/dd
+    H_tt = (-(np.outer(Rd, t) + np.outer(t, Rd)) + c * np.eye(2)) / L**3 - 3.0 * c * np.outer(t, t) / L**5
+    H_dt = -_R / L + np.outer(Rt, t) / L**3  # rows d, columns t
+    # z -> (t, d): t = b - a, d = p - a
+    M = np.zeros((4, 6))
+    M[0:2, 4:6], M[0:2, 2:4] = np.eye(2), -np.eye(2)
+    M[2:4, 0:2], M[2:4, 2:4] = np.eye(2), -np.eye(2)
+    H = np.zeros((4, 4))
+    H[0:2, 0:2], H[2:4, 0:2], H[0:2, 2:4] = H_tt, H_dt, H_dt.T
+    grad = M.T @ np.concatenate([g_t, g_d])
+    return g, grad, M.T @ H @ M
+
+
+class SelfContact:
+    """The penalty on a surface of ``n`` nodes with reference positions ``X`` (n, 2) and segments
+    ``segments`` (m, 2) of node indices, each ordered so that its right-hand normal points out of the
+    body. ``stiffness`` is kappa mu (MPa)."""
+
+    def __init__(self, X: np.ndarray, segments: np.ndarray, stiffness: float, reach: float = REACH):
+        self.X = np.asarray(X, float)
+        self.segments = np.asarray(segments, np.int64)
+        self.stiffness = float(stiffness)
+        self.reach = reach
+        a, b = self.X[self.segments[:, 0]], self.X[self.segments[:, 1]]
+        self.seg_length = np.linalg.norm(b - a, axis=1)
+        tributary = np.zeros(len(self.X))
+        np.add.at(tributary, self.segments[:, 0], self.seg_length / 2)
+        np.add.at(tributary, self.segments[:, 1], self.seg_length / 2)
+        self.tributary = tributary
+        # a node can only touch a segment it faces in the reference (on its outer side or on its line):
+        # what lies behind a segment there is the body's own far side (a corner's other face), not contact
+        t = b - a
+        normal = np.stack([t[:, 1], -t[:, 0]], axis=1) / self.seg_length[:, None]
+        facing = np.einsum("ijk,jk->ij", self.X[:, None, :] - a[None, :, :], normal)
+        self.facing = facing >= -1e-9 * self.seg_length[None, :]
+        self.k = np.full(len(self.X), self.stiffness)
+
+    def pairs(self, u: np.ndarray) -> ContactState:
+        """The active pairs of displacement ``u`` (n, 2): each node with the segment it has passed through
+        least deeply (none if it is outside every segment it projects onto)."""
+        x = self.X + u
+        a, b = x[self.segments[:, 0]], x[self.segments[:, 1]]
+        t = b - a
+        L = np.linalg.norm(t, axis=1)
+        n = np.stack([t[:, 1], -t[:, 0]], axis=1) / L[:, None]
+        rel = x[:, None, :] - a[None, :, :]  # (n, m, 2)
+        s = np.einsum("ijk,jk->ij", rel, t) / (L**2)[None, :]
+        g = np.einsum("ijk,jk->ij", rel, n)
+        own = np.zeros(g.shape, bool)
+        idx = np.arange(len(self.segments))
+        own[self.segments[:, 0], idx] = True
+        own[self.segments[:, 1], idx] = True
+        depth = self.reach * self.seg_length[None, :]
+        active = (~own) & self.facing & (s >= -OVERLAP) & (s <= 1.0 + OVERLAP) & (g < 0.0) & (g > -depth)
+        nodes, segs, gaps, coef = [], [], [], []
+        for i in np.flatnonzero(active.any(axis=1)):
+            cand = np.flatnonzero(active[i])
+            j = cand[np.argmax(g[i, cand])]  # the shallowest penetration: the nearest face
+            # a node over the joint of two segments of that face qualifies for both: always the first,
+            # so that the pairing does not flip between Newton iterates (the residual would not converge)
+            joint = [k for k in cand if k < j and set(self.segments[k]) & set(self.segments[j])]
+            j = min(joint) if joint else j
+            nodes.append(i)
+            segs.append(j)
+            gaps.append(g[i, j])
+            coef.append(s[i, j])
+        gaps = np.asarray(gaps, float)
+        nodes = np.asarray(nodes, np.int64)
+        energy = float(0.5 * np.sum(self.k[nodes] * gaps**2)) if len(nodes) else 0.0
+        return ContactState(energy, nodes, np.asarray(segs, np.int64), gaps, np.asarray(coef, float))
+
+    def energy(self, u: np.ndarray) -> float:
+        return self.pairs(u).energy
+
+    def derivatives(self, u: np.ndarray, state: ContactState | None = None):
+        """(energy, gradient (n, 2), Hessian entries (rows, cols, values) in the flattened node-component
+        numbering 2 i + c) at displacement ``u``."""
+        state = self.pairs(u) if state is None else state
+        x = self.X + u
+        grad = np.zeros((len(self.X), 2))
+        rows, cols, vals = [], [], []
+        for i, j, in zip(state.nodes, state.segments):
+            ia, ib = self.segments[j]
+            g, dg, d2g = _gap_derivatives(x[i], x[ia], x[ib])
+            k = self.k[i]
+            which = np.array([2 * i, 2 * i + 1, 2 * ia, 2 * ia + 1, 2 * ib, 2 * ib + 1])
+            np.add.at(grad.reshape(-1), which, k * g * dg)
+            H = k * (np.outer(dg, dg) + g * d2g)
+            rows.append(np.repeat(which, 6))
+            cols.append(np.tile(which, 6))
+            vals.append(H.reshape(-1))
+        if rows:
+            rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+        else:
+            rows = cols = np.empty(0, np.int64)
+            vals = np.empty(0)
+        return state.energy, grad, (rows, cols, vals)
+
+    def contact_length(self, state: ContactState) -> float:
+        """Reference surface length in contact: the tributary lengths of the nodes in contact [mm]."""
+        return float(np.sum(self.tributary[state.nodes])) if len(state.nodes) else 0.0
+
+    def zones(self, state: ContactState) -> list[list[int]]:
+        """The contact zones: groups of nodes in contact joined along the surface (through segments whose
+        two ends are both in contact, on either face)."""
+        inside = set(int(i) for i in state.nodes)
+        # a node's partners: the ends of the segment it touches are in the same zone as it
+        parent = {i: i for i in inside}
+
+        def find(i):
+            while parent[i] != i:
+                parent[i] = parent[parent[i]]
+                i = parent[i]
+            return i
+
+        def join(i, j):
+            if i in parent and j in parent:
+                parent[find(i)] = find(j)
+
+        for a, b in self.segments:
+            join(int(a), int(b))
+        for i, j in zip(state.nodes, state.segments):
+            for e in self.segments[j]:
+                if int(e) not in parent:
+                    parent[int(e)] = int(e)
+                join(int(i), int(e))
+        groups: dict[int, list[int]] = {}
+        for i in inside:
+            groups.setdefault(find(i), []).append(i)
+        return sorted((sorted(g) for g in groups.values()), key=lambda g: g[0])
+
+
+# history.csv's columns with self-contact on (Problem.observables)
+COLUMNS = ("contact_length_mm", "creases", "contact_x_mm", "contact_y_mm", "penetration_mm")
+# the gap a state may show: a penetration beyond this fraction of the node's tributary length means the
+# penalty was overrun (a crossing the pairing no longer sees): the state is a model limit, not contact
+GAP_LIMIT = 0.1
+
+# roles of the surface that can touch itself: every boundary that holds no displacement component
+CONTACT_ROLES = ("permeable", "impermeable", "free")
+
+
+@dataclass
+class ContactTerms:
+    """The penalty at one iterate, in the global numbering of the mixed space (the same on every rank):
+    its energy; its gradient at ``grad_dofs``; and one 6 x 6 Hessian block per active pair."""
+
+    energy: float
+    grad_dofs: np.ndarray  # (2 n,) global dofs (u_x, u_y of each surface node)
+    grad: np.ndarray  # (2 n,)
+    blocks: list  # [(dofs (6,), H (6, 6))]
+
+
+class SurfaceContact:
+    """The self-contact penalty of a :class:`~app.model.problem.Problem`'s traction-free surface.
+
+    The surface's nodes (their reference positions and global displacement dofs) and its segments
+    (oriented outward) are gathered once on every rank; each evaluation gathers the surface nodes'
+    current displacement from their owners and computes the whole term on every rank (the surface is
+    a polyline of a few hundred nodes). The solvers add it to the energy, the residual and the Hessian
+    (:class:`app.solvers.newton.NewtonSolver`'s ``extra``)."""
+
+    def __init__(self, problem, kappa: float):
+        p = self.p = problem
+        self.kappa = float(kappa)
+        mu = max(float(getattr(m, m.law.stiffness)) for m in p.materials.values())
+        groups = [g for g in p.geo.boundaries if p.geo.boundaries[g] in CONTACT_ROLES]
+        domain, V, fdim = p.domain, p.V_u, p.domain.topology.dim - 1
+        facets = p.facets_of(groups)
+        n_owned_f = domain.topology.index_map(fdim).size_local
+        facets = facets[facets < n_owned_f]
+        domain.topology.create_connectivity(fdim, fdim + 1)
+        f2c = domain.topology.connectivity(fdim, fdim + 1)
+        points = V.tabulate_dof_coordinates()[:, :2]
+        gdofs = compat.global_indices(p.W, p.u_dofs)  # global W dof of each u dof (2 blk + c)
+        mids = compat.facet_midpoints(domain, facets) if len(facets) else np.empty((0, 2))
+        cells = np.array([f2c.links(f)[0] for f in facets], np.int32)
+        cmids = compat.cell_midpoints(domain, cells) if len(cells) else np.empty((0, 2))
+        domain.topology.create_connectivity(fdim, 0)
+        domain.topology.create_connectivity(fdim + 1, 0)
+        f2v, c2v = domain.topology.connectivity(fdim, 0), domain.topology.connectivity(fdim + 1, 0)
+        mine = []
+        for f, c, fm, cm in zip(facets, cells, mids, cmids):
+            # a P1 cell's dofs follow its vertices: the facet's two vertices' places in the cell give its dofs
+            corners = list(c2v.links(c))
+            cell_dofs = V.dofmap.cell_dofs(c)
+            blk = np.array([cell_dofs[corners.index(v)] for v in f2v.links(f)])
+            a, b = points[blk[0]], points[blk[1]]
+            t = b - a
+            if (fm - cm) @ np.array([t[1], -t[0]]) < 0:  # the right-hand normal must point out of the cell
+                blk = blk[::-1]
+            ends = [(int(gdofs[2 * k]), int(gdofs[2 * k + 1]), *points[k]) for k in blk]
+            mine.append(ends)
+        segs = [s for part in p.comm.allgather(mine) for s in part]
+        nodes: dict[int, int] = {}
+        X, dofs, pairs = [], [], []
+        for ends in segs:
+            ij = []
+            for gx, gy, x, y in ends:
+                if gx not in nodes:
+                    nodes[gx] = len(X)
+                    X.append((x, y))
+                    dofs.append((gx, gy))
+                ij.append(nodes[gx])
+            pairs.append(ij)
+        self.dofs = np.asarray(dofs, np.int64).reshape(-1, 2)
+        self.penalty = SelfContact(np.asarray(X, float).reshape(-1, 2), np.asarray(pairs, np.int64).reshape(-1, 2),
+                                   self.kappa * mu)
+        # the owned surface dofs of this rank: where the current displacement is read
+        start = p.W.dofmap.index_map.local_range[0] * p.W.dofmap.index_map_bs
+        n_owned = compat.owned_size(p.W)
+        local = {int(g): int(i) for i, g in zip(p.u_dofs, gdofs) if i < n_owned}
+        flat = self.dofs.reshape(-1)
+        self._mine = np.array([k for k, g in enumerate(flat) if int(g) in local], np.int64)
+        self._mine_local = np.array([local[int(flat[k])] for k in self._mine], np.int64)
+        self._start = start
+
+    @property
+    def size(self) -> int:
+        return len(self.penalty.X)
+
+    def displacement(self, owned_values) -> np.ndarray:
+        """The surface nodes' displacement (n, 2) from each rank's owned part of a mixed-space array (a
+        PETSc vector's ``array`` or a Function's owned entries)."""
+        flat = np.zeros(self.dofs.size)
+        parts = self.p.comm.allgather((self._mine, np.asarray(owned_values)[self._mine_local]))
+        for k, v in parts:
+            flat[k] = v
+        return flat.reshape(-1, 2)
+
+    def state(self, owned_values) -> ContactState:
+        return self.penalty.pairs(self.displacement(owned_values))
+
+    def energy(self, owned_values) -> float:
+        return self.penalty.energy(self.displacement(owned_values))
+
+    def terms(self, owned_values, hessian: bool = True) -> ContactTerms:
+        u = self.displacement(owned_values)
+        energy, grad, (rows, cols, vals) = self.penalty.derivatives(u)
+        flat = self.dofs.reshape(-1)
+        blocks = []
+        if hessian:
+            for k in range(0, len(rows), 36):
+                which = flat[rows[k:k + 36:6]]
+                blocks.append((which, vals[k:k + 36].reshape(6, 6)))
+        return ContactTerms(energy, flat, grad.reshape(-1), blocks)

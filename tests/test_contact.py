@@ -1,0 +1,206 @@
+"""Self-contact of the traction-free surface (stability.contact; app/model/contact.py, docs/creases.md).
+
+- The penalty's gradient and Hessian against central finite differences of its energy.
+- The exact check: a gel block with a slit down its symmetry line, swelling between two rollers, presses the
+  slit's faces onto each other; with contact it must give the state of its half with u_x = 0 on the
+  symmetry line (the same mesh's left half, so node for node), to the penalty's accuracy (the largest
+  penetration), and that error must fall with the stiffness; without contact the faces pass through each
+  other. Serially and on 2 ranks.
+- A homogeneous layer compressed past Biot's onset, followed with contact on: its branch runs into a crease
+  and goes on in contact (before, it ended with status contact at the first touch).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import run_to_end
+from mpi4py import MPI
+
+from app import config
+from app.model.contact import GAP_LIMIT, SelfContact, _gap_derivatives
+
+
+def test_the_gap_and_the_penalty_have_their_finite_difference_derivatives():
+    rng = np.random.default_rng(3)
+    eps = 1e-6
+    for _ in range(5):
+        z = rng.normal(size=6)
+        g, dg, H = _gap_derivatives(*z.reshape(3, 2))
+        fd = np.array([(_gap_derivatives(*(z + eps * e).reshape(3, 2))[0]
+                        - _gap_derivatives(*(z - eps * e).reshape(3, 2))[0]) / (2 * eps) for e in np.eye(6)])
+        fdH = np.array([(_gap_derivatives(*(z + eps * e).reshape(3, 2))[1]
+                         - _gap_derivatives(*(z - eps * e).reshape(3, 2))[1]) / (2 * eps) for e in np.eye(6)])
+        assert np.abs(fd - dg).max() < 1e-8 * max(1.0, np.abs(dg).max())
+        assert np.abs(fdH - H).max() < 1e-7 * max(1.0, np.abs(H).max())
+        assert np.array_equal(H, H.T)
+    # a U-shaped open polyline whose two arms are pushed through each other: the whole term
+    X = np.array([[-1.0, 1.0], [-1.0, 0.5], [-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [1.0, 0.5], [1.0, 1.0]]) * 0.1
+    X[:3, 0] = -0.001
+    X[4:, 0] = 0.001
+    segs = np.array([[i + 1, i] for i in range(len(X) - 1)])  # the body lies below/inside: right normal out
+    pen = SelfContact(X, segs, stiffness=50.0)
+    u = np.zeros_like(X)
+    u[:3, 0], u[4:, 0] = 0.0015, -0.0015
+    u += rng.normal(scale=1e-4, size=u.shape)
+    e, grad, (rows, cols, vals) = pen.derivatives(u)
+    assert len(pen.pairs(u).nodes) >= 4 and e > 0
+    H = np.zeros((u.size, u.size))
+    np.add.at(H, (rows, cols), vals)
+    flat = u.reshape(-1)
+    fd = np.array([(pen.energy((flat + eps * v).reshape(-1, 2)) - pen.energy((flat - eps * v).reshape(-1, 2)))
+                   / (2 * eps) for v in np.eye(u.size)])
+    fdH = np.array([(pen.derivatives((flat + eps * v).reshape(-1, 2))[1] - pen.derivatives((flat - eps * v)
+                     .reshape(-1, 2))[1]).reshape(-1) / (2 * eps) for v in np.eye(u.size)])
+    assert np.abs(fd - grad.reshape(-1)).max() < 1e-6 * np.abs(grad).max()
+    assert np.abs(fdH - H).max() < 1e-5 * np.abs(H).max()
+    # the reference state touches nothing (the arms face each other at a distance)
+    assert pen.energy(np.zeros_like(X)) == 0.0
+
+
+def slit_block(path: str, half: bool, L=0.5, H=0.3, d=0.15, nx=10, ny_low=6, ny_up=8) -> None:
+    """A block [-L, L] x [0, H] with a slit of depth d down x = 0 from the top (two faces, "slit"), or its
+    left half (the symmetry line "mid"); structured quadrilaterals, the same nodes in the left half."""
+    import gmsh
+
+    gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.model.add("slit")
+    g = gmsh.model.geo
+
+    def P(x, y):
+        return g.addPoint(x, y, 0)
+
+    p1, p2, p3, p4, p5, p6 = P(-L, 0), P(0, 0), P(0, H - d), P(0, H), P(-L, H), P(-L, H - d)
+    l_b, l_m, l_s, l_t, l_u, l_l, l_c = (g.addLine(p1, p2), g.addLine(p2, p3), g.addLine(p3, p4), g.addLine(p4, p5),
+                                         g.addLine(p5, p6), g.addLine(p6, p1), g.addLine(p6, p3))
+    surfs = [g.addPlaneSurface([g.addCurveLoop([l_b, l_m, -l_c, l_l])]),
+             g.addPlaneSurface([g.addCurveLoop([l_c, l_s, l_t, l_u])])]
+    groups = {"left": [l_u, l_l], "bottom": [l_b], "top": [l_t]}
+    counts = [(l_b, nx), (l_c, nx), (l_t, nx), (l_m, ny_low), (l_l, ny_low), (l_s, ny_up), (l_u, ny_up)]
+    if half:
+        groups["mid"] = [l_m, l_s]
+    else:
+        p7, p8, p9, p10 = P(L, 0), P(L, H - d), P(L, H), P(0, H)  # p10: the right face's own top corner
+        r_b, r_lo, r_up, r_t, r_s, r_c = (g.addLine(p2, p7), g.addLine(p7, p8), g.addLine(p8, p9), g.addLine(p9, p10),
+                                          g.addLine(p10, p3), g.addLine(p3, p8))
+        surfs += [g.addPlaneSurface([g.addCurveLoop([r_b, r_lo, -r_c, -l_m])]),
+                  g.addPlaneSurface([g.addCurveLoop([r_c, r_up, r_t, r_s])])]
+        groups["bottom"].append(r_b)
+        groups["top"].append(r_t)
+        groups["slit"] = [l_s, r_s]
+        groups["right"] = [r_lo, r_up]
+        counts += [(r_b, nx), (r_c, nx), (r_t, nx), (r_lo, ny_low), (r_up, ny_up), (r_s, ny_up)]
+    g.synchronize()
+    for line, n in counts:
+        gmsh.model.mesh.setTransfiniteCurve(line, n + 1)
+    for s in surfs:
+        gmsh.model.mesh.setTransfiniteSurface(s)
+        gmsh.model.mesh.setRecombine(2, s)
+    gmsh.model.addPhysicalGroup(2, surfs, 1)
+    gmsh.model.setPhysicalName(2, 1, "gel")
+    for tag, (name, lines) in enumerate(groups.items(), start=10):
+        gmsh.model.addPhysicalGroup(1, lines, tag)
+        gmsh.model.setPhysicalName(1, tag, name)
+    gmsh.model.mesh.generate(2)
+    gmsh.write(path)
+    gmsh.finalize()
+
+
+FULL = {"left": "roller_x", "right": "roller_x", "bottom": "fixed", "top": "permeable", "slit": "impermeable"}
+HALF = {"left": "roller_x", "mid": "roller_x", "bottom": "fixed", "top": "permeable"}
+
+
+def _slit_run(path: Path, boundaries: dict, comm, contact: bool, kappa: float = 1000.0):
+    cfg = config.resolve({
+        "geometry": {"kind": "msh", "file": str(path), "layers": {"gel": "substrate"}, "boundaries": boundaries},
+        "time": {"end": 0.3, "dt_initial": 0.05, "adaptive": False},
+        "stability": {"error_estimate": False, "contact": contact, "contact_stiffness": kappa},
+        "reduced": {"beside_2d": False}, "output": {"fields": False}})
+    p, st, rows = run_to_end(cfg, comm)
+    arr = p.state.x.array
+    n = p.V_u.dofmap.index_map.size_local
+    coords = p.V_u.tabulate_dof_coordinates()[:n, :2]
+    u = np.stack([arr[p.u_dofs[0:2 * n:2]], arr[p.u_dofs[1:2 * n:2]]], axis=1)
+    parts = comm.allgather((coords, u))
+    coords, u = np.concatenate([c for c, _ in parts]), np.concatenate([v for _, v in parts])
+    depth = 0.0
+    if p.contact is not None:
+        state = p.contact.state(arr)
+        depth = float(-state.gaps.min()) if len(state.gaps) else 0.0
+    return coords, u, rows[-1], depth
+
+
+@pytest.fixture(scope="module")
+def slit_meshes(tmp_path_factory):
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path_factory.mktemp("slit")) if comm.rank == 0 else None))
+    if comm.rank == 0:
+        slit_block(str(base / "full.msh"), half=False)
+        slit_block(str(base / "half.msh"), half=True)
+    comm.barrier()
+    return base
+
+
+def test_a_slit_pressed_onto_itself_is_its_half_with_a_symmetry_line(slit_meshes):
+    """Measured serially: |u_full - u_half| = 4.6e-8 mm at the nodes of the left half, below the largest
+    penetration (1.4e-7 mm) and against a displacement of 3.1e-4 mm; without contact 5.5e-4 mm. The full
+    block's stored energy is twice the half's (the slit's faces carry no shear)."""
+    comm = MPI.COMM_WORLD
+    ch, uh, rh, _ = _slit_run(slit_meshes / "half.msh", HALF, comm, contact=False)
+    out = {}
+    for name, contact, kappa in (("stiff", True, 1.0e4), ("default", True, 1.0e3), ("none", False, 1.0e3)):
+        cf, uf, rf, depth = _slit_run(slit_meshes / "full.msh", FULL, comm, contact, kappa)
+        left = cf[:, 0] < -1e-9
+        key = {tuple(np.round(c, 9)): i for i, c in enumerate(ch)}
+        idx = np.array([key[tuple(np.round(c, 9))] for c in cf[left]])
+        out[name] = (float(np.abs(uf[left] - uh[idx]).max()), depth, rf)
+    scale = float(np.abs(uh).max())
+    err, depth, rf = out["default"]
+    assert 0 < depth < 1e-3 * scale * 10  # the faces touch, and barely overlap
+    assert err <= depth  # the state is the half's to within the penalty's gap
+    assert out["none"][0] > 1e3 * err  # without contact the faces pass through each other
+    assert out["stiff"][0] < 0.2 * err and out["stiff"][1] < 0.2 * depth  # and the error falls with 1/kappa
+    assert rf.energy == pytest.approx(2 * rh.energy, rel=1e-7)
+    assert rf.fluid_volume == pytest.approx(2 * rh.fluid_volume, rel=1e-7)
+
+
+FILM = 0.01
+CREASING = {
+    "geometry": {"length": 0.2, "substrate_thickness": 0.1, "film_thickness": FILM},
+    "mesh": {"element_size": 0.01, "film_layers": 2, "substrate_grading": 1.25},
+    "material": {"film": {"modulus_ratio": 1.0}},
+    "loading": {"kind": "compression", "compression_strain": 0.528},  # test_postbuckling's rate, 0.6 / s
+    "time": {"end": 0.88, "dt_initial": 0.02, "dt_max": 0.02},
+    "stability": {"after_onset": "branch", "error_estimate": False, "imperfection": 1.0, "contact": True},
+    "output": {"fields": False, "plot": False}, "reduced": {"beside_2d": False},
+}
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: the 2-rank contact is checked on the slit")
+def test_a_compressed_layer_creases_and_is_followed_in_contact(tmp_path):
+    """tests/test_postbuckling's creasing layer ends with status contact at its first touch without contact.
+    With it, the branch goes on in contact: the first contact comes after the linear onset, the surface in
+    contact grows, every accepted state overlaps by less than GAP_LIMIT of an element, and each accepted
+    minimizing step lowered the energy (the minimizer's test: no energy rejections were needed to end)."""
+    from conftest import read_csv, read_json
+
+    from app.workflows.run import simulate
+
+    out = tmp_path / "out"
+    s = simulate(config.resolve(CREASING), out, MPI.COMM_SELF, progress=False)
+    assert s["status"] in ("buckled", "completed"), s["message"]
+    rows = read_csv(out / "history.csv")
+    assert {"contact_length_mm", "creases", "penetration_mm"} <= set(rows[0])
+    first = s["creases"]["first_contact"]
+    assert first is not None and first["applied_strain"] > s["critical"]["applied_strain"]
+    touching = [r for r in rows if float(r["contact_length_mm"]) > 0]
+    assert len(touching) >= 4 and touching[-1]["time"] == rows[-1]["time"]
+    lengths = [float(r["contact_length_mm"]) for r in touching]
+    assert lengths == sorted(lengths) and lengths[-1] > lengths[0]
+    assert all(int(r["creases"]) >= 1 for r in touching)
+    assert max(float(r["penetration_mm"]) for r in rows) < GAP_LIMIT * 0.01
+    assert s["creases"]["zones"]
+    assert read_json(out / "summary.json")["creases"] == s["creases"]
