@@ -72,7 +72,7 @@ class MinimizingNewton(NewtonSolver):
     def _objective(self, snes, x):
         with timing.timed("assembly"):
             self._sync_solution(x)
-            return self.energy(x.array)
+            return self.energy(x.array_r)
 
     def energy(self, owned_values=None) -> float:
         """Pi at ``w`` (or at the owned values given, already in ``w``): the energy form plus the extra

@@ -87,7 +87,10 @@ class NewtonSolver:
         linear = settings.linear
         options = {
             "snes_type": "newtonls",
-            "snes_linesearch_type": settings.line_search,
+            # with a contact term the pairing can flip between iterates where a node just touches: a plain
+            # Newton step may then cycle between two active sets; backtracking (on |R|^2, or on the energy in
+            # the minimizer) breaks the cycle
+            "snes_linesearch_type": "bt" if extra is not None else settings.line_search,
             "snes_rtol": settings.rtol,
             "snes_atol": settings.atol,
             "snes_stol": 0.0,
@@ -159,7 +162,7 @@ class NewtonSolver:
             compat.assemble_residual_into(b, self.residual_form, self.hessian_form, self.bcs, x,
                                           lifting=self._lifting)
             if self.extra is not None:
-                terms = self.extra.terms(x.array, hessian=False)
+                terms = self.extra.terms(x.array_r, hessian=False)
                 rows = self._free_rows(terms.grad_dofs)
                 keep = rows >= 0
                 b.array[rows[keep] - self._rows[0]] += terms.grad[keep]
@@ -239,7 +242,7 @@ class NewtonSolver:
         with timing.timed("assembly"):
             compat.assemble_matrix_into(J, self.hessian_form, self.bcs)
             if self.extra is not None:
-                terms = self.extra.terms(x.array)
+                terms = self.extra.terms(x.array_r)
                 for dofs, H in terms.blocks:
                     cols = np.where(np.isin(dofs, self._held), -1, dofs).astype(PETSc.IntType)
                     J.setValues(self._free_rows(dofs), cols, H, addv=PETSc.InsertMode.ADD_VALUES)
