@@ -278,3 +278,40 @@ def test_a_checkpoint_taken_in_contact_resumes_identically(tmp_path):
         assert resumed["creases"][key] == pytest.approx(full["creases"][key], rel=rel)
     assert resumed["creases"]["max_penetration_mm"] == pytest.approx(full["creases"]["max_penetration_mm"],
                                                                       rel=1e-9)
+
+
+def test_the_contact_traction_field_is_on_the_slit_and_balanced(slit_meshes, tmp_path):
+    """fields.xdmf carries the contact traction for ParaView: at the last output it is nonzero on the slit's
+    faces only, normal to them (along x), and the two faces' resultants (traction times tributary length)
+    are equal and opposite (Newton's third law for the penalty's pair forces). Measured: |t_y / t_x| <= 2.5e-6,
+    resultants equal to 1.3e-8."""
+    h5py = pytest.importorskip("h5py")
+    from test_xdmf import _data, _grids
+
+    from app.workflows.run import simulate
+
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    cfg = config.resolve({
+        "geometry": {"kind": "msh", "file": str(slit_meshes / "full.msh"), "layers": {"gel": "substrate"},
+                     "boundaries": FULL},
+        "time": {"end": 0.3, "dt_initial": 0.05, "adaptive": False},
+        "stability": {"error_estimate": False, "contact": True}, "reduced": {"beside_2d": False},
+        "output": {"fields": True, "plot": False}})
+    simulate(cfg, base / "out", comm, progress=False)
+    if comm.rank:
+        return
+    grid = _grids(base / "out" / "fields.xdmf")[-1]
+    attrs = {a.get("Name"): a for a in grid.findall("Attribute")}
+    with h5py.File(base / "out" / "fields.h5", "r") as h5:
+        X = _data(h5, grid.find("Geometry"))[:, :2]
+        t = _data(h5, attrs["contact_traction"])[:, :2]
+    size = np.linalg.norm(t, axis=1)
+    on = size > 1e-12 * size.max()  # (the output space's interpolation leaves 1e-20 MPa elsewhere)
+    assert on.sum() >= 10
+    assert np.all(np.abs(X[on, 0]) < 1e-12) and np.all(X[on, 1] >= 0.15 - 1e-12)  # on the slit only
+    assert np.all(np.abs(t[on, 1]) < 1e-4 * np.abs(t[on, 0]))  # normal to the faces
+    left, right = on & (t[:, 0] < 0), on & (t[:, 0] > 0)  # the left face is pushed to -x, the right to +x
+    assert left.sum() and right.sum()
+    # the faces' nodes have the same tributary lengths, node for node: the sums of their tractions balance
+    assert t[left, 0].sum() == pytest.approx(-t[right, 0].sum(), rel=1e-6)

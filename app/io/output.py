@@ -207,6 +207,16 @@ class ResultWriter:
             f = compat.Function(space)
             f.name = name
             self._fields.append((f, compat.expression(expr, space)))
+        if problem.contact is not None:  # the self-contact's traction on the surface nodes [MPa]
+            f = compat.Function(compat.vector_space(domain, "Lagrange", 1))  # the displacement's output space
+            f.name = "contact_traction"
+            on_u = compat.Function(problem.V_u)  # the traction where the solver's dofs are, then interpolated
+
+            def fill(target, state=problem.state, contact=problem.contact):
+                contact.traction_into(on_u, state.x.array)
+                compat.interpolate(target, on_u)
+
+            self._fields.append((f, _Filled(fill)))
 
     def write_fields(self, t: float, step: int = 0) -> None:
         """The fields at time t, if they are written at accepted step number ``step``."""
@@ -214,7 +224,10 @@ class ResultWriter:
             return
         with timing.timed("output"):
             for f, expr in self._fields:
-                compat.interpolate(f, expr)
+                if isinstance(expr, _Filled):  # a field that is not a UFL expression (the contact traction)
+                    expr.fill(f)
+                else:
+                    compat.interpolate(f, expr)
             try:
                 self._xdmf.write([f for f, _ in self._fields], t)
             except ResultWriteError as err:
@@ -345,6 +358,13 @@ FIELDS = (
     ("stress_xy", "Cauchy stress sigma_xy [MPa], per cell"),
     ("stress_min_principal", "smaller in-plane principal Cauchy stress [MPa] (the film's compression), per cell"),
 )
+
+
+class _Filled:
+    """A field computed outside UFL: ``fill(f)`` writes it into the Function f."""
+
+    def __init__(self, fill):
+        self.fill = fill
 
 
 def field_expressions(problem):

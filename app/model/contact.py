@@ -273,6 +273,9 @@ class SurfaceContact:
         self._mine = np.array([k for k, g in enumerate(flat) if int(g) in local], np.int64)
         self._mine_local = np.array([local[int(flat[k])] for k in self._mine], np.int64)
         self._start = start
+        # where this rank's owned surface entries sit in the displacement space (fields for ParaView)
+        in_u = {int(w): i for i, w in enumerate(p.u_dofs)}
+        self._mine_in_u = np.array([in_u[int(w)] for w in self._mine_local], np.int64)
 
     @property
     def size(self) -> int:
@@ -292,6 +295,27 @@ class SurfaceContact:
 
     def energy(self, owned_values) -> float:
         return self.penalty.energy(self.displacement(owned_values))
+
+    def traction(self, owned_values) -> np.ndarray:
+        """The contact traction (n, 2) [MPa] on each surface node: the penalty's force on the node over its
+        tributary length, kappa mu |g| / l along the touched segment's outward normal (0 off contact)."""
+        u = self.displacement(owned_values)
+        state = self.penalty.pairs(u)
+        pen = self.penalty
+        out = np.zeros_like(u)
+        x = pen.X + u
+        for i, j, g in zip(state.nodes, state.segments, state.gaps):
+            a, b = x[pen.segments[j, 0]], x[pen.segments[j, 1]]
+            t = b - a
+            n = np.array([t[1], -t[0]]) / np.linalg.norm(t)
+            out[i] = pen.k[i] * (-g) / pen.tributary[i] * n
+        return out
+
+    def traction_into(self, f, owned_values) -> None:
+        """Write :meth:`traction` into a Function ``f`` of the problem's displacement space."""
+        f.x.array[:] = 0.0
+        f.x.array[self._mine_in_u] = self.traction(owned_values).reshape(-1)[self._mine]
+        compat.scatter_forward(f)
 
     def terms(self, owned_values, hessian: bool = True) -> ContactTerms:
         u = self.displacement(owned_values)

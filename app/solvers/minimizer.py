@@ -36,6 +36,7 @@ from app.solvers.newton import NewtonResult, NewtonSolver, SolverSettings
 
 SHIFT_START = 1e-6  # first trial shift (times |diag K|) of a factorization with negative pivots
 SHIFT_MAX = 1e6  # beyond this the direction is a scaled gradient step already
+OUTSIDE = 1e300  # the objective outside Pi's domain (see MinimizingNewton._objective)
 ITERATION_FACTOR = 4  # escaping a saddle may take more iterations than an ordinary step
 
 
@@ -70,9 +71,13 @@ class MinimizingNewton(NewtonSolver):
     # --- SNES callbacks ------------------------------------------------------------------------
 
     def _objective(self, snes, x):
+        """Pi at the iterate; outside Pi's domain (a cell with det F <= 0, where ln J is not defined: NaN) a
+        value far above any energy of the step, so that the backtracking line search shortens the step
+        (PETSc's line search gives up at once on a NaN objective)."""
         with timing.timed("assembly"):
             self._sync_solution(x)
-            return self.energy(x.array_r)
+            value = self.energy(x.array_r)
+            return value if math.isfinite(value) else OUTSIDE
 
     def energy(self, owned_values=None) -> float:
         """Pi at ``w`` (or at the owned values given, already in ``w``): the energy form plus the extra
