@@ -71,13 +71,14 @@ class MinimizingNewton(NewtonSolver):
     # --- SNES callbacks ------------------------------------------------------------------------
 
     def _objective(self, snes, x):
-        """Pi at the iterate; outside Pi's domain (a cell with det F <= 0, where ln J is not defined: NaN) a
-        value far above any energy of the step, so that the backtracking line search shortens the step
-        (PETSc's line search gives up at once on a NaN objective)."""
+        """Pi at the iterate. With a contact term, outside Pi's domain (a cell with det F <= 0, where ln J is
+        not defined: NaN) a value far above any energy of the step, so that the backtracking line search
+        shortens the step (PETSc's line search gives up at once on a NaN objective, and the step is cut
+        back: the behaviour without contact, kept as it was)."""
         with timing.timed("assembly"):
             self._sync_solution(x)
             value = self.energy(x.array_r)
-            return value if math.isfinite(value) else OUTSIDE
+            return value if math.isfinite(value) or self.extra is None else OUTSIDE
 
     def energy(self, owned_values=None) -> float:
         """Pi at ``w`` (or at the owned values given, already in ``w``): the energy form plus the extra
