@@ -131,6 +131,17 @@ class SelfContact:
     def energy(self, u: np.ndarray) -> float:
         return self.pairs(u).energy
 
+    def gradient(self, u: np.ndarray):
+        """(energy, gradient (n, 2)) at displacement ``u``."""
+        state = self.pairs(u)
+        x = self.X + u
+        grad = np.zeros((len(self.X), 2))
+        for i, j in zip(state.nodes, state.segments):
+            ia, ib = self.segments[j]
+            g, dg, _ = _gap_derivatives(x[i], x[ia], x[ib])
+            np.add.at(grad.reshape(-1), [2 * i, 2 * i + 1, 2 * ia, 2 * ia + 1, 2 * ib, 2 * ib + 1], self.k[i] * g * dg)
+        return state.energy, grad
+
     def derivatives(self, u: np.ndarray, state: ContactState | None = None):
         """(energy, gradient (n, 2), Hessian entries (rows, cols, values) in the flattened node-component
         numbering 2 i + c) at displacement ``u``."""
@@ -202,12 +213,11 @@ CONTACT_ROLES = ("permeable", "impermeable", "free")
 @dataclass
 class ContactTerms:
     """The penalty at one iterate, in the global numbering of the mixed space (the same on every rank):
-    its energy; its gradient at ``grad_dofs``; and one 6 x 6 Hessian block per active pair."""
+    its energy and its gradient at ``grad_dofs``."""
 
     energy: float
     grad_dofs: np.ndarray  # (2 n,) global dofs (u_x, u_y of each surface node)
     grad: np.ndarray  # (2 n,)
-    blocks: list  # [(dofs (6,), H (6, 6))]
 
 
 class SurfaceContact:
@@ -317,13 +327,38 @@ class SurfaceContact:
         f.x.array[self._mine_in_u] = self.traction(owned_values).reshape(-1)[self._mine]
         compat.scatter_forward(f)
 
-    def terms(self, owned_values, hessian: bool = True) -> ContactTerms:
-        u = self.displacement(owned_values)
-        energy, grad, (rows, cols, vals) = self.penalty.derivatives(u)
-        flat = self.dofs.reshape(-1)
-        blocks = []
-        if hessian:
-            for k in range(0, len(rows), 36):
-                which = flat[rows[k:k + 36:6]]
-                blocks.append((which, vals[k:k + 36].reshape(6, 6)))
-        return ContactTerms(energy, flat, grad.reshape(-1), blocks)
+    def entry_blocks(self, owned_values) -> list:
+        """The Hessian's 6 x 6 blocks at the state ``owned_values`` (owned part of a mixed-space array), as
+        (surface entries (6,), H): entry 2 i + c is node i's displacement component c."""
+        _, _, (rows, _, vals) = self.penalty.derivatives(self.displacement(owned_values))
+        return [(rows[k:k + 36:6], vals[k:k + 36].reshape(6, 6)) for k in range(0, len(rows), 36)]
+
+    def entries_in(self, space, V, u_dofs) -> np.ndarray:
+        """Global dof in ``space`` of each surface entry (2 n,), for a mixed space whose displacement part,
+        collapsed, is ``V`` (P1 like the problem's; ``u_dofs``: V's index -> space's local dof), as the
+        stability criteria's own spaces: the numbering is carried over by interpolating entry numbers (P1
+        to P1 on one mesh: node to node, slits included)."""
+        p = self.p
+        number = compat.Function(p.V_u)
+        number.x.array[:] = -1.0
+        number.x.array[self._mine_in_u] = self._mine.astype(float)
+        compat.scatter_forward(number)
+        there = compat.Function(V)
+        compat.interpolate(there, number)
+        values = np.rint(there.x.array[:compat.owned_size(V)]).astype(np.int64)
+        local = np.flatnonzero(values >= 0)
+        glob = compat.global_indices(space, np.asarray(u_dofs)[local])
+        out = np.full(2 * self.size, -1, np.int64)
+        for k, g in p.comm.allgather((values[local], glob)):
+            out[k] = g
+        return out
+
+    @property
+    def global_entries(self) -> np.ndarray:
+        """Global dof in the problem's mixed space of each surface entry (2 n,)."""
+        return self.dofs.reshape(-1)
+
+    def terms(self, owned_values) -> ContactTerms:
+        """The energy and gradient at the state ``owned_values``, in the mixed space's global dofs."""
+        energy, grad = self.penalty.gradient(self.displacement(owned_values))
+        return ContactTerms(energy, self.global_entries, grad.reshape(-1))

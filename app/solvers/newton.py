@@ -39,6 +39,40 @@ class SolverSettings:
                    s["ksp_max_it"])
 
 
+def allow_new_nonzeros(A: PETSc.Mat) -> None:
+    """Let ``A`` take entries outside the pattern of its form (an extra term's couplings)."""
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, False)
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATIONS, True)
+
+
+def held_global(bcs, space, comm) -> np.ndarray:
+    """Global dofs of ``space`` under any of the Dirichlet conditions ``bcs`` (all ranks)."""
+    held = compat.global_indices(space, compat.owned_bc_dofs(bcs, space))
+    return np.unique(np.concatenate(comm.allgather(held)))
+
+
+def free_rows(dofs: np.ndarray, rows: tuple[int, int], held: np.ndarray) -> np.ndarray:
+    """Global dofs in this rank's row range ``rows`` that no condition holds; -1 (PETSc skips it) elsewhere."""
+    lo, hi = rows
+    keep = (dofs >= lo) & (dofs < hi) & ~np.isin(dofs, held)
+    return np.where(keep, dofs, -1).astype(PETSc.IntType)
+
+
+def add_blocks(A: PETSc.Mat, blocks: list, to_global: np.ndarray, held: np.ndarray) -> bool:
+    """Add an extra term's Hessian blocks (entries (6,), H (6, 6)) to the assembled ``A``: entry e is the
+    global dof ``to_global[e]``; this rank adds its own rows, no row or column of a held dof. Whether any
+    block was added (``A`` is then assembled again: the same on every rank, the blocks being so)."""
+    rows = A.getOwnershipRange()
+    for entries, H in blocks:
+        dofs = to_global[entries]
+        cols = np.where(np.isin(dofs, held) | (dofs < 0), -1, dofs).astype(PETSc.IntType)
+        A.setValues(free_rows(np.where(dofs < 0, -1, dofs), rows, held), cols, H, addv=PETSc.InsertMode.ADD_VALUES)
+    if blocks:
+        A.assemble()
+    return bool(blocks)
+
+
 ROUNDOFF_UPDATE = 1e3 * np.finfo(float).eps  # a Newton update below this times |x| is at roundoff
 STAGNATION = 0.5  # a residual that falls by less than this factor in one iteration has stagnated
 DIVTOL = 1e4  # PETSc's default divergence tolerance (SNESConvergedDefault's DIVERGED_DTOL)
@@ -59,10 +93,12 @@ class NewtonSolver:
     solver's field-split preconditioner; the direct solver does not need them.
 
     ``extra`` is a term of the energy that is not a form (the surface's self-contact,
-    :class:`app.model.contact.SurfaceContact`): ``extra.terms(owned_values, hessian)`` gives its energy,
-    gradient and Hessian blocks in global dof numbers, the same on every rank; each rank adds the rows it
-    owns, outside the Dirichlet dofs (whose rows and columns stay those of the conditions). Its Hessian
-    couples surface dofs that no cell couples: the matrix takes new nonzeros where contact begins."""
+    :class:`app.model.contact.SurfaceContact`): ``extra.terms(owned_values)`` gives its energy and gradient
+    in global dof numbers, ``extra.entry_blocks(owned_values)`` its Hessian as blocks on its entries,
+    ``extra.global_entries`` their global dofs; the same on every rank. Each rank adds the rows it owns,
+    outside the Dirichlet dofs (whose rows and columns stay those of the conditions; :func:`add_blocks`).
+    Its Hessian couples surface dofs that no cell couples: the matrix takes new nonzeros where contact
+    begins."""
 
     def __init__(self, residual, hessian, bcs, w, settings: SolverSettings, comm, fields: dict | None = None,
                  extra=None):
@@ -78,11 +114,8 @@ class NewtonSolver:
         self._lifting = True
         self.extra = extra
         if extra is not None:
-            self.A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-            self.A.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, False)
-            self.A.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATIONS, True)
-            held = compat.global_indices(w.function_space, self._bc_dofs)
-            self._held = np.unique(np.concatenate(comm.allgather(held)))
+            allow_new_nonzeros(self.A)
+            self._held = held_global(bcs, w.function_space, comm)
             self._rows = self.A.getOwnershipRange()
         linear = settings.linear
         options = {
@@ -162,16 +195,10 @@ class NewtonSolver:
             compat.assemble_residual_into(b, self.residual_form, self.hessian_form, self.bcs, x,
                                           lifting=self._lifting)
             if self.extra is not None:
-                terms = self.extra.terms(x.array_r, hessian=False)
-                rows = self._free_rows(terms.grad_dofs)
+                terms = self.extra.terms(x.array_r)
+                rows = free_rows(terms.grad_dofs, self._rows, self._held)
                 keep = rows >= 0
                 b.array[rows[keep] - self._rows[0]] += terms.grad[keep]
-
-    def _free_rows(self, dofs: np.ndarray) -> np.ndarray:
-        """Global dofs this rank owns and no condition holds; -1 (PETSc skips it) elsewhere."""
-        lo, hi = self._rows
-        keep = (dofs >= lo) & (dofs < hi) & ~np.isin(dofs, self._held)
-        return np.where(keep, dofs, -1).astype(PETSc.IntType)
 
     def _needs_lifting(self, x: PETSc.Vec) -> bool:
         """Whether the initial guess misses the Dirichlet values (then the residual needs the lifting
@@ -242,12 +269,7 @@ class NewtonSolver:
         with timing.timed("assembly"):
             compat.assemble_matrix_into(J, self.hessian_form, self.bcs)
             if self.extra is not None:
-                terms = self.extra.terms(x.array_r)
-                for dofs, H in terms.blocks:
-                    cols = np.where(np.isin(dofs, self._held), -1, dofs).astype(PETSc.IntType)
-                    J.setValues(self._free_rows(dofs), cols, H, addv=PETSc.InsertMode.ADD_VALUES)
-                if terms.blocks:
-                    J.assemble()
+                add_blocks(J, self.extra.entry_blocks(x.array_r), self.extra.global_entries, self._held)
 
     def solve(self) -> NewtonResult:
         """Solve from the current ``w`` as initial guess; ``w`` holds the result."""

@@ -28,6 +28,7 @@ from slepc4py import SLEPc
 
 from app import compat, timing
 from app.solvers import mumps
+from app.solvers.newton import add_blocks, allow_new_nonzeros, held_global
 
 
 @dataclass
@@ -44,6 +45,10 @@ class HessianOperator:
     def __init__(self, hessian, comm, keep: np.ndarray | None = None):
         self.k, self.comm, self.W, self.bcs = hessian, comm, hessian.space, hessian.bcs
         self.A = compat.create_matrix(self.k.form)
+        self.contact = getattr(hessian, "contact", None)  # an extra term's Hessian (self-contact), added
+        if self.contact is not None:
+            allow_new_nonzeros(self.A)
+            self._held = held_global(self.bcs, self.W, comm)
         free = ~self.fixed()
         if keep is not None:
             kept = np.zeros_like(free)
@@ -64,6 +69,11 @@ class HessianOperator:
         """The matrix at the current converged state (free dofs only); ``A`` holds it on the whole space."""
         self.k.refresh()
         compat.assemble_matrix_into(self.A, self.k.form, self.bcs)
+        if self.contact is not None:
+            blocks = self.contact.entry_blocks(compat.function_vector(self.k.source).array)
+            if add_blocks(self.A, blocks, self.contact.global_entries, self._held) and self.Kf is not None:
+                self.Kf.destroy()  # the pattern may have grown: the free block is extracted anew
+                self.Kf = None
         if self.Kf is None:
             self.Kf = self.A.createSubMatrix(self.is_free, self.is_free)
         else:
@@ -93,6 +103,10 @@ class DrainedOperator:
         self.h, self.comm = hessian, comm
         space = hessian.space
         self.A = compat.create_matrix(hessian.form)
+        self.contact = getattr(hessian, "contact", None)  # an extra term's Hessian (self-contact), added
+        if self.contact is not None:
+            allow_new_nonzeros(self.A)
+            self._held = held_global(hessian.bcs, space, comm)
         n_owned = compat.owned_size(space)
         fixed = np.zeros(n_owned, dtype=bool)
         fixed[compat.owned_bc_dofs(hessian.bcs, space)] = True
@@ -111,6 +125,13 @@ class DrainedOperator:
         """S = K_uu - K_uc K_cc^-1 K_cu on the free displacement dofs."""
         self.h.refresh()
         compat.assemble_matrix_into(self.A, self.h.form, self.h.bcs)
+        if self.contact is not None:
+            blocks = self.contact.entry_blocks(compat.function_vector(self.h.source).array)
+            if add_blocks(self.A, blocks, self.h.contact_entries, self._held):
+                for obj in (self.S, *self._sub.values()):  # the pattern may have grown: all blocks anew
+                    if obj is not None:
+                        obj.destroy()
+                self.S, self._sub = None, {}
         sub = self._sub
         for name, rows, cols in (("uu", self.is_free, self.is_free), ("uc", self.is_free, self.is_c),
                                  ("cc", self.is_c, self.is_c)):
@@ -225,7 +246,8 @@ class StabilityAnalyzer:
             self._ksp = ksp
         self._ksp.setOperators(Kf)
         self._ksp.setUp()
-        self._ksp_options.clear()  # read by the first factorization
+        if getattr(self.op, "contact", None) is None:  # with contact Kf may be a new matrix: a new factor
+            self._ksp_options.clear()  # read by the first factorization
         nneg, nzero, npos = self._ksp.getPC().getFactorMatrix().getInertia()
         return int(nneg) + self.op.eliminated_negatives(), int(nzero), int(npos)
 
