@@ -33,9 +33,9 @@ def main(argv: list[str]) -> int:
     walls: dict[int, float] = {}
     advance = TimeStepper.advance
 
-    def timed(self):
+    def timed(self, *args, **kwargs):
         t0 = time.perf_counter()
-        rec = advance(self)
+        rec = advance(self, *args, **kwargs)
         walls[rec.step] = time.perf_counter() - t0
         return rec
 
