@@ -43,7 +43,7 @@ def evolution(p: Problem) -> Evolution:
     """What the time stepper advances of a problem: its forms, conditions, index sets and hooks."""
     return Evolution(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w, p.state, p.u_dofs, p.q_dofs,
                      p.comm, cell_content_change(p), tuple(p.loading.kinks()), p.diffusion, p.set_time,
-                     p.step_influx, p.observables, p.contact)
+                     p.step_influx, p.observables, getattr(p, "contact", None))
 
 
 def time_stepper(p: Problem, time: TimeSettings, solver: SolverSettings, log=None, limits: bool = True,

@@ -70,7 +70,8 @@ def zero_increment_hessian(problem, tau: float) -> OwnHessian:
     tau_c = compat.Constant(p.domain, compat.ScalarType(tau))
     mu_bar = compat.Constant(p.domain, compat.ScalarType(0.0))  # does not enter K (linear in dQ)
     pot = build(work, state, type(p.mat)(**fields), tau_c, mu_bar, p.dx, p.surface_measure, p.dx_coupling)
-    return OwnHessian(compat.form(pot.hessian), work, state, tau_c, p.W, p.bcs, p.u_dofs, p.state, tau, p.contact)
+    return OwnHessian(compat.form(pot.hessian), work, state, tau_c, p.W, p.bcs, p.u_dofs, p.state, tau,
+                      getattr(p, "contact", None))
 
 
 class DrainedHessian:
@@ -94,11 +95,11 @@ class DrainedHessian:
         self.bcs = p.fixed_displacement_conditions(self.space.sub(0))
         self._V_u, self.u_dofs = compat.collapse(self.space.sub(0))
         _, self.c_dofs = compat.collapse(self.space.sub(1))
-        self.contact = p.contact  # the self-contact term, if on: its Hessian at the converged state is added
+        self.contact = getattr(p, "contact", None)  # the self-contact term: its Hessian at the state is added
         self.source = p.state
         # each surface entry's global dof in this space (the contact's Hessian lands there)
-        self.contact_entries = (p.contact.entries_in(self.space, self._V_u, self.u_dofs)
-                                if p.contact is not None else None)
+        self.contact_entries = (self.contact.entries_in(self.space, self._V_u, self.u_dofs)
+                                if self.contact is not None else None)
 
     def refresh(self) -> None:
         """Own coefficients at the converged state: u = u_n (carried over from the problem's displacement
