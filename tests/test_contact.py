@@ -190,8 +190,9 @@ def test_a_compressed_layer_creases_and_is_followed_in_contact(tmp_path):
     from app.workflows.run import simulate
 
     out = tmp_path / "out"
-    s = simulate(config.resolve(CREASING), out, MPI.COMM_SELF, progress=False)
+    s = simulate(config.resolve(CREASING, ["output.plot=true"]), out, MPI.COMM_SELF, progress=False)
     assert s["status"] in ("buckled", "completed"), s["message"]
+    assert (out / "wrinkles.png").stat().st_size > 0 and (out / "amplitude.png").stat().st_size > 0
     rows = read_csv(out / "history.csv")
     assert {"contact_length_mm", "creases", "penetration_mm"} <= set(rows[0])
     first = s["creases"]["first_contact"]

@@ -326,7 +326,9 @@ class ResultWriter:
 
         outputs = [("profiles.npz", save_npz)]
         if self.settings.plot:
-            outputs += [("wrinkles.png", lambda tmp: wrinkles_plot(profiles.tuples(), critical, profiles.closed, tmp)),
+            creases = {float(r["time"]): int(r["creases"]) for r in self.rows if r.get("creases") not in (None, "")}
+            outputs += [("wrinkles.png", lambda tmp: wrinkles_plot(profiles.tuples(), critical, profiles.closed, tmp,
+                                                                   creases=creases)),
                         ("amplitude.png", lambda tmp: amplitude_plot(self.rows, critical, tmp))]
 
         def files():

@@ -244,10 +244,12 @@ def isomode_plot(rows: list[dict], title: str, param: str, path) -> None:
     plt.close(fig)
 
 
-def wrinkles_plot(profiles: list[tuple], critical: dict | None, closed: bool, path, count: int = 8) -> None:
+def wrinkles_plot(profiles: list[tuple], critical: dict | None, closed: bool, path, count: int = 8,
+                  creases: dict | None = None) -> None:
     """Surface profiles (the detrended normal displacement, app.model.surface.surface_profile) at up to
     ``count`` growths, evenly spaced from the first to the last, each offset by its rank, as wrinkle
-    profiles are shown in experimental papers. ``profiles``: (growth_mm, time, position, profile) tuples."""
+    profiles are shown in experimental papers. ``profiles``: (growth_mm, time, position, profile) tuples;
+    ``creases``: time -> number of contact zones (with self-contact), written beside each profile."""
     if not profiles:
         return
     pick = np.unique(np.round(np.linspace(0, len(profiles) - 1, min(count, len(profiles)))).astype(int))
@@ -257,7 +259,9 @@ def wrinkles_plot(profiles: list[tuple], critical: dict | None, closed: bool, pa
     for k, (g, t, pos, prof) in enumerate(chosen):
         x = np.degrees(pos) if closed else pos
         ax.plot(x, 1e3 * (prof + k * 1.2 * span), lw=1.0, color=plt.cm.viridis(k / max(1, len(chosen) - 1)))
-        ax.text(x.max(), 1e3 * k * 1.2 * span, f"  g = {1e3 * g:.2f} um", va="center", fontsize=8)
+        zones = (creases or {}).get(float(t), 0)
+        ax.text(x.max(), 1e3 * k * 1.2 * span, f"  g = {1e3 * g:.2f} um" + (f", {zones} contact zone(s)" if zones else ""),
+                va="center", fontsize=8)
     ax.set_xlabel("angle around the passage [deg]" if closed else "position along the surface [mm]")
     ax.set_ylabel("normal displacement, detrended and offset [um]")
     gc = f" (g_c = {1e3 * critical['growth_mm']:.3f} um)" if critical else ""
@@ -277,6 +281,9 @@ def amplitude_plot(rows: list[dict], critical: dict | None, path) -> None:
     ax.plot(g[order], a[order], "o-", ms=2.5, color="C0", label="amplitude")
     if critical:
         ax.axvline(1e3 * critical["growth_mm"], color="C3", ls="--", lw=1, label="g_c")
+    touching = [r for r in rows if float(r.get("contact_length_mm") or 0.0) > 0.0]
+    if touching:  # with self-contact: the first state in contact, the troughs folded into creases
+        ax.axvline(1e3 * float(touching[0]["growth_mm"]), color="C2", ls=":", lw=1.2, label="first contact")
     ax.set_xlabel("growth [um]")
     ax.set_ylabel("amplitude [um]", color="C0")
     ax2 = ax.twinx()
