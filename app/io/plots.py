@@ -260,8 +260,8 @@ def wrinkles_plot(profiles: list[tuple], critical: dict | None, closed: bool, pa
         x = np.degrees(pos) if closed else pos
         ax.plot(x, 1e3 * (prof + k * 1.2 * span), lw=1.0, color=plt.cm.viridis(k / max(1, len(chosen) - 1)))
         zones = (creases or {}).get(float(t), 0)
-        ax.text(x.max(), 1e3 * k * 1.2 * span, f"  g = {1e3 * g:.2f} um" + (f", {zones} contact zone(s)" if zones else ""),
-                va="center", fontsize=8)
+        label = f"  g = {1e3 * g:.2f} um" + (f", {zones} contact zone(s)" if zones else "")
+        ax.text(x.max(), 1e3 * k * 1.2 * span, label, va="center", fontsize=8)
     ax.set_xlabel("angle around the passage [deg]" if closed else "position along the surface [mm]")
     ax.set_ylabel("normal displacement, detrended and offset [um]")
     gc = f" (g_c = {1e3 * critical['growth_mm']:.3f} um)" if critical else ""
