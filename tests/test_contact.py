@@ -204,6 +204,8 @@ def test_a_compressed_layer_creases_and_is_followed_in_contact(tmp_path):
     assert all(int(r["creases"]) >= 1 for r in touching)
     assert max(float(r["penetration_mm"]) for r in rows) < GAP_LIMIT * 0.01
     assert s["creases"]["zones"]
+    # every minimizing step's Pi (with the penalty) ended below its start; none had to be retried for it
+    assert s["postbuckling"]["minimizer"]["energy_rejections"] == 0 and s["postbuckling"]["minimizer"]["saddles"] == 0
     assert read_json(out / "summary.json")["creases"] == s["creases"]
 
 
