@@ -44,7 +44,6 @@ class ContactState:
     nodes: np.ndarray  # (P,) slave node of each active pair
     segments: np.ndarray  # (P,) master segment of each pair
     gaps: np.ndarray  # (P,) g < 0 [mm]
-    coefficient: np.ndarray  # (P,) s in [0, 1]: where on the segment
 
 
 def _gap_derivatives(p: np.ndarray, a: np.ndarray, b: np.ndarray):
@@ -91,7 +90,11 @@ class SelfContact:
         t = b - a
         normal = np.stack([t[:, 1], -t[:, 0]], axis=1) / self.seg_length[:, None]
         facing = np.einsum("ijk,jk->ij", self.X[:, None, :] - a[None, :, :], normal)
-        self.facing = facing >= -1e-9 * self.seg_length[None, :]
+        # a node's partners: the segments it does not belong to and faced in the reference
+        own = np.zeros(facing.shape, bool)
+        own[self.segments[:, 0], np.arange(len(self.segments))] = True
+        own[self.segments[:, 1], np.arange(len(self.segments))] = True
+        self.partners = ~own & (facing >= -1e-9 * self.seg_length[None, :])
         self.k = np.full(len(self.X), self.stiffness)
 
     def pairs(self, u: np.ndarray) -> ContactState:
@@ -105,13 +108,9 @@ class SelfContact:
         rel = x[:, None, :] - a[None, :, :]  # (n, m, 2)
         s = np.einsum("ijk,jk->ij", rel, t) / (L**2)[None, :]
         g = np.einsum("ijk,jk->ij", rel, n)
-        own = np.zeros(g.shape, bool)
-        idx = np.arange(len(self.segments))
-        own[self.segments[:, 0], idx] = True
-        own[self.segments[:, 1], idx] = True
         depth = self.reach * self.seg_length[None, :]
-        active = (~own) & self.facing & (s >= -OVERLAP) & (s <= 1.0 + OVERLAP) & (g < 0.0) & (g > -depth)
-        nodes, segs, gaps, coef = [], [], [], []
+        active = self.partners & (s >= -OVERLAP) & (s <= 1.0 + OVERLAP) & (g < 0.0) & (g > -depth)
+        nodes, segs, gaps = [], [], []
         for i in np.flatnonzero(active.any(axis=1)):
             cand = np.flatnonzero(active[i])
             j = cand[np.argmax(g[i, cand])]  # the shallowest penetration: the nearest face
@@ -122,43 +121,31 @@ class SelfContact:
             nodes.append(i)
             segs.append(j)
             gaps.append(g[i, j])
-            coef.append(s[i, j])
         gaps = np.asarray(gaps, float)
         nodes = np.asarray(nodes, np.int64)
         energy = float(0.5 * np.sum(self.k[nodes] * gaps**2)) if len(nodes) else 0.0
-        return ContactState(energy, nodes, np.asarray(segs, np.int64), gaps, np.asarray(coef, float))
+        return ContactState(energy, nodes, np.asarray(segs, np.int64), gaps)
 
     def energy(self, u: np.ndarray) -> float:
         return self.pairs(u).energy
 
-    def gradient(self, u: np.ndarray):
-        """(energy, gradient (n, 2)) at displacement ``u``."""
+    def derivatives(self, u: np.ndarray, hessian: bool = True):
+        """(energy, gradient (n, 2), Hessian entries (rows, cols, values) in the flattened node-component
+        numbering 2 i + c; empty without ``hessian``) at displacement ``u``."""
         state = self.pairs(u)
         x = self.X + u
         grad = np.zeros((len(self.X), 2))
-        for i, j in zip(state.nodes, state.segments):
-            ia, ib = self.segments[j]
-            g, dg, _ = _gap_derivatives(x[i], x[ia], x[ib])
-            np.add.at(grad.reshape(-1), [2 * i, 2 * i + 1, 2 * ia, 2 * ia + 1, 2 * ib, 2 * ib + 1], self.k[i] * g * dg)
-        return state.energy, grad
-
-    def derivatives(self, u: np.ndarray, state: ContactState | None = None):
-        """(energy, gradient (n, 2), Hessian entries (rows, cols, values) in the flattened node-component
-        numbering 2 i + c) at displacement ``u``."""
-        state = self.pairs(u) if state is None else state
-        x = self.X + u
-        grad = np.zeros((len(self.X), 2))
         rows, cols, vals = [], [], []
-        for i, j, in zip(state.nodes, state.segments):
+        for i, j in zip(state.nodes, state.segments):
             ia, ib = self.segments[j]
             g, dg, d2g = _gap_derivatives(x[i], x[ia], x[ib])
             k = self.k[i]
             which = np.array([2 * i, 2 * i + 1, 2 * ia, 2 * ia + 1, 2 * ib, 2 * ib + 1])
             np.add.at(grad.reshape(-1), which, k * g * dg)
-            H = k * (np.outer(dg, dg) + g * d2g)
-            rows.append(np.repeat(which, 6))
-            cols.append(np.tile(which, 6))
-            vals.append(H.reshape(-1))
+            if hessian:
+                rows.append(np.repeat(which, 6))
+                cols.append(np.tile(which, 6))
+                vals.append((k * (np.outer(dg, dg) + g * d2g)).reshape(-1))
         if rows:
             rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
         else:
@@ -276,13 +263,11 @@ class SurfaceContact:
         self.penalty = SelfContact(np.asarray(X, float).reshape(-1, 2), np.asarray(pairs, np.int64).reshape(-1, 2),
                                    self.kappa * mu)
         # the owned surface dofs of this rank: where the current displacement is read
-        start = p.W.dofmap.index_map.local_range[0] * p.W.dofmap.index_map_bs
         n_owned = compat.owned_size(p.W)
         local = {int(g): int(i) for i, g in zip(p.u_dofs, gdofs) if i < n_owned}
         flat = self.dofs.reshape(-1)
         self._mine = np.array([k for k, g in enumerate(flat) if int(g) in local], np.int64)
         self._mine_local = np.array([local[int(flat[k])] for k in self._mine], np.int64)
-        self._start = start
         # where this rank's owned surface entries sit in the displacement space (fields for ParaView)
         in_u = {int(w): i for i, w in enumerate(p.u_dofs)}
         self._mine_in_u = np.array([in_u[int(w)] for w in self._mine_local], np.int64)
@@ -360,5 +345,5 @@ class SurfaceContact:
 
     def terms(self, owned_values) -> ContactTerms:
         """The energy and gradient at the state ``owned_values``, in the mixed space's global dofs."""
-        energy, grad = self.penalty.gradient(self.displacement(owned_values))
+        energy, grad, _ = self.penalty.derivatives(self.displacement(owned_values), hessian=False)
         return ContactTerms(energy, self.global_entries, grad.reshape(-1))
