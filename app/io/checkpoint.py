@@ -57,7 +57,8 @@ PROFILE_MEMBERS = {"growth_mm": "profile_growth", "time": "profile_time", "posit
 # only sets the 1D counterpart computed after the run; stability.surface_check adds a summary entry only, and
 # the trial crease (stability.creases and its parameters) is computed after the run on a mesh of its own.
 FREE_KEYS = ("output", "time.end", "time.max_steps", "stability.error_estimate", "stability.surface_check", "reduced",
-             "stability.creases", "stability.crease_size", "stability.crease_resolution")
+             "stability.creases", "stability.crease_size", "stability.crease_resolution",
+             "stability.crease_fluid")
 
 
 class CheckpointError(config.ConfigError):

@@ -40,6 +40,10 @@ class Loading:
     #: no fluid moves (conditions() gives flux_open None): a state at load t has no history, which the trial
     #: crease of stability.creases needs (app.onset.creases)
     fluid_frozen: ClassVar[bool] = False
+    #: a bath at mu_bar(t) reaches the body through its permeable surface: the state at load t in
+    #: equilibrium with it (quasi-static swelling) has no history either; the trial crease compares grand
+    #: potentials there (app.model.equilibrium)
+    bath_equilibrium: ClassVar[bool] = False
 
     def __init__(self, params: dict, *, mu_start: float, end_time: float, drive: Drive | None = None):
         """``params``: this loading's keys; ``mu_start``: mu0 of the material under the permeable surface
@@ -71,6 +75,10 @@ class Loading:
     def kinks(self) -> list[float]:
         """Times where the load rate jumps: steps must not cross them."""
         return []
+
+    def load_end(self) -> float:
+        """The time after which the load no longer changes (what a scan over equilibrium states covers)."""
+        return self.end_time
 
     def conditions(self, boundaries: dict[str, str]) -> BoundaryConditions:
         """Dirichlet and no-flux conditions for facet groups with roles (``GeometrySetup.boundaries``):
@@ -109,9 +117,13 @@ class Swelling(RampedSurface):
     the end of the ramp."""
 
     name = "swelling"
+    bath_equilibrium = True
 
     def kinks(self) -> list[float]:
         return [self.params["ramp_time"]]
+
+    def load_end(self) -> float:
+        return min(self.end_time, self.params["ramp_time"])
 
 
 class Compression(RampedSurface):

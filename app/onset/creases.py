@@ -18,8 +18,14 @@ neo-Hookean half-space in plane-strain compression; the linear, Biot onset is 0.
 The creased state is reached from the flat one by moving the crease's points to the symmetry line in
 sub-steps, each solved by the minimizing Newton (energy line search, inertia correction: the fold passes
 through states where K is indefinite); a sub-step that fails is halved. The load enters through the
-problem's loading: only loadings without fluid motion (``compression``: the fluid frozen, the energy path
-independent) have a flat state at every load without a history, which this test needs.
+problem's loading, and the test needs a flat state at every load without a history:
+
+- a loading without fluid motion (``compression``: the fluid frozen, the energy path independent): the
+  energy is the stored energy;
+- a swelling loading: the body in equilibrium with its bath at mu_bar(t) (quasi-static swelling, the
+  drained limit), the energy the grand potential G = Psi - mu_bar (fluid volume); the creased state's fluid
+  is free to follow (drained: both states in equilibrium with the bath) or held at the flat state's
+  (undrained). :mod:`app.model.equilibrium` writes both energies.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from app import compat
+from app.model.equilibrium import equilibrium
 from app.solvers.minimizer import MinimizingNewton
 from app.solvers.newton import NewtonSolver, SolverSettings
 
@@ -48,6 +55,8 @@ class Trial:
     penetration: float  # the deepest crossing of the symmetry line by the free surface [mm] (0: none)
     depth: float  # the crease tip's depth below the flat surface [mm]
     substeps: int
+    mu_bar: float = 0.0  # the bath's chemical potential at t [MPa]
+    growth: float = 0.0  # the flat state's growth [mm]
 
     @property
     def difference(self) -> float:
@@ -55,17 +64,20 @@ class Trial:
 
 
 FLAT_STRAIN_STEP = 0.02  # the flat state is followed in load steps of at most this applied strain
+FLAT_HALVINGS = 10  # a flat-state load step that fails is halved at most this often
 MIN_SUBSTEP = 1.0e-3  # the smallest fraction of the crease's motion one sub-step may take
 
 
 class CreaseTrial:
-    """The trial crease of length ``length`` [mm, reference] at the symmetry line x = ``line`` of a problem
-    whose loading moves no fluid."""
+    """The trial crease of length ``length`` [mm, reference] at the symmetry line x = ``line`` of a problem:
+    under a loading that moves no fluid the states' energy is the stored energy; under swelling the states
+    are in equilibrium with the bath and the energy is the grand potential, with the creased state's fluid
+    free (``fluid = "drained"``) or held at the flat state's (``"undrained"``): :mod:`app.model.equilibrium`."""
 
-    def __init__(self, problem, length: float, settings: SolverSettings, substeps: int = 20, line: float = 0.0):
+    def __init__(self, problem, length: float, settings: SolverSettings, substeps: int = 20, line: float = 0.0,
+                 fluid: str = "drained"):
         p = self.problem = problem
-        if p.diffusion:
-            raise ValueError("a trial crease needs a loading without fluid motion (loading.kind = compression)")
+        sys = self.system = equilibrium(p, fluid)
         self.length, self.line, self.substeps = length, line, substeps
         fdim = p.domain.topology.dim - 1
         surface = p.facets_of(p.geo.facets_with_role("permeable"))
@@ -73,51 +85,67 @@ class CreaseTrial:
         facets = surface[np.abs(mid[:, 0] - line) < length].astype(np.int32)
         if p.comm.allreduce(len(facets)) == 0:
             raise ValueError(f"no surface facet within {length:g} mm of the symmetry line x = {line:g}")
-        self.bc, self.target = compat.dirichlet_function_on_facets(p.W.sub(0).sub(0), facets, fdim)
-        V0, self._x_dofs = compat.collapse(p.W.sub(0).sub(0))
-        _, self._y_dofs = compat.collapse(p.W.sub(0).sub(1))  # the same nodes in the same order
+        self.bc, self.target = compat.dirichlet_function_on_facets(sys.displacement.sub(0), facets, fdim)
+        V0, self._x_dofs = compat.collapse(sys.displacement.sub(0))
+        _, self._y_dofs = compat.collapse(sys.displacement.sub(1))  # the same nodes in the same order
         self._points = compat.dof_points(V0)
         self._X = self._points[:, 0]
         # the surface's nodes: the body's top (a flat surface, as the bilayer's)
         top = p.comm.allreduce(float(self._points[:, 1].max()) if len(self._points) else -np.inf, op=_max())
         self._on_surface = np.isclose(self._points[:, 1], top, rtol=0.0, atol=1e-9 * max(1.0, abs(top)))
-        self.flat_solver = NewtonSolver(p.forms.residual, p.forms.hessian, p.bcs, p.w, settings, p.comm)
-        self.crease_solver = MinimizingNewton(p.forms.energy, p.forms.residual, p.forms.hessian,
-                                              p.bcs + [self.bc], p.w, settings, p.comm)
-        self._flat = p.w.x.array.copy()  # the last flat state and its load time
+        self.flat_solver = NewtonSolver(sys.residual, sys.hessian, sys.bcs, sys.w, settings, p.comm)
+        self.crease_solver = MinimizingNewton(sys.energy, sys.residual, sys.hessian,
+                                              sys.bcs + [self.bc] + sys.kept, sys.w, settings, p.comm)
+        self._flat = sys.w.x.array.copy()  # the last flat state and its load time
         self._flat_time = 0.0
+        self._growth = 0.0
 
     def flat_state(self, t: float) -> float:
-        """Solve the flat state at load time t (followed from the last one in small load steps); its energy."""
-        p = self.problem
+        """Solve the flat state at load time t (followed from the last one in small load steps, a step that
+        fails halved); its energy."""
+        p, sys = self.problem, self.system
         lo = p.loading
         strain_change = abs(lo.applied_strain(t) - lo.applied_strain(self._flat_time))
         steps = max(1, int(np.ceil(strain_change / FLAT_STRAIN_STEP)))
-        p.w.x.array[:] = self._flat
-        for tk in np.linspace(self._flat_time, t, steps + 1)[1:]:
-            p.set_time(float(tk), 1.0)
+        sys.w.x.array[:] = self._flat
+        targets = list(np.linspace(self._flat_time, t, steps + 1)[1:])
+        done, halvings = self._flat_time, 0
+        while targets:
+            tk = float(targets[0])
+            before = sys.w.x.array.copy()
+            sys.set_load(tk)
             res = self.flat_solver.solve()
-            if not res.converged:
-                raise CreaseFailed(f"the flat state did not converge at t = {tk:.6g} s (SNES reason {res.reason})")
-        self._flat, self._flat_time = p.w.x.array.copy(), t
-        return self._energy()
+            if res.converged:
+                done = targets.pop(0)
+                continue
+            sys.w.x.array[:] = before
+            halvings += 1
+            if halvings > FLAT_HALVINGS:
+                raise CreaseFailed(f"the flat state did not converge at t = {tk:.6g} s (SNES reason {res.reason}, "
+                                   f"load steps halved {FLAT_HALVINGS} times from t = {done:.6g} s)")
+            targets.insert(0, 0.5 * (done + tk))
+        self._flat, self._flat_time = sys.w.x.array.copy(), t
+        self._growth = sys.growth()
+        return sys.value()
 
-    def _energy(self) -> float:
-        p = self.problem
-        p.state.x.array[:] = p.w.x.array  # the stored energy is the state's (no fluid moves: Q stays 0)
-        return p.stored_energy()
+    def flat_growth(self, t: float) -> float:
+        """The flat state's growth at load time t [mm]."""
+        self.flat_state(t)
+        return self._growth
 
     def trial(self, t: float) -> Trial:
         """The flat and creased states at load time t and their energies."""
-        p = self.problem
+        p, sys = self.problem, self.system
         flat = self.flat_state(t)
         strain = p.loading.applied_strain(t)
         X = self._X
-        flat_x = p.w.x.array[self._x_dofs]  # the flat state's u_x (the crease's points start from it)
+        w = sys.w.x.array
+        flat_x = w[self._x_dofs]  # the flat state's u_x (the crease's points start from it)
+        sys.keep(self._flat)
         s, ds, taken = 0.0, 1.0 / self.substeps, 0
         while s < 1.0:
             step = min(ds, 1.0 - s)
-            before = p.w.x.array.copy()
+            before = w.copy()
             # the crease's points move from the flat state's position to the symmetry line: u_x = line - X
             self.target.x.array[:] = (1 - (s + step)) * flat_x + (s + step) * (self.line - X)
             res = self.crease_solver.solve()
@@ -125,16 +153,23 @@ class CreaseTrial:
                 s += step
                 taken += 1
                 continue
-            p.w.x.array[:] = before
+            w[:] = before
             ds = step / 2
             if ds < MIN_SUBSTEP:
-                raise CreaseFailed(f"the trial crease did not close at t = {t:.6g} s (applied strain {strain:.4g}): "
+                w[:] = self._flat
+                raise CreaseFailed(f"the trial crease did not close at t = {t:.6g} s ({self._load(t)}): "
                                    f"{s:.3f} of its motion done, the minimizing Newton failed with sub-steps of "
                                    f"{2 * ds:.2g} (SNES reason {res.reason})")
-        creased = self._energy()
-        penetration, depth = self._shape(p.w.x.array, self._flat)
-        p.w.x.array[:] = self._flat
-        return Trial(t, strain, flat, creased, penetration, depth, taken)
+        creased = sys.value()
+        penetration, depth = self._shape(w, self._flat)
+        w[:] = self._flat
+        return Trial(t, strain, flat, creased, penetration, depth, taken, p.loading.mu_bar(t), self._growth)
+
+    def _load(self, t: float) -> str:
+        lo = self.problem.loading
+        if self.system.fluid == "frozen":
+            return f"applied strain {lo.applied_strain(t):.4g}"
+        return f"bath potential {lo.mu_bar(t):.4g} MPa, growth {self._growth:.4g} mm"
 
     def _shape(self, creased: np.ndarray, flat: np.ndarray) -> tuple[float, float]:
         """(the deepest crossing of the symmetry line by the surface, the depth of the crease's tip below the

@@ -29,6 +29,9 @@ STABILITY: dict[str, Key] = {
     "creases": key(bool, False, None, "also find the energetic crease onset (docs/creases.md)"),
     "crease_size": key(float, 0.05, in_open(0.0, 0.5), "the trial crease's length / the body's thickness"),
     "crease_resolution": key(int, 32, in_closed(8, 256), "elements along the trial crease (finest of 3 meshes)"),
+    "crease_fluid": key(str, "drained", one_of("drained", "undrained"),
+                        "under swelling: the creased state's fluid follows the bath (drained) or keeps the flat "
+                        "state's content (undrained); without fluid motion it has no effect"),
     "contact": key(bool, False, None, "self-contact of the traction-free surface as a penalty term: a followed "
                    "branch goes on past the fold into creases (docs/creases.md)"),
     "contact_stiffness": key(float, 1000.0, in_closed(10.0, 1.0e6),

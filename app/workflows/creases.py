@@ -4,7 +4,13 @@ The trial crease (:class:`app.onset.creases.CreaseTrial`) is computed on meshes 
 the crease's tip: three of them, with ``stability.crease_resolution`` / 4, / 2 and x 1 elements along the
 crease. On each, the load where the creased state's energy falls below the flat state's is bracketed and
 then found by regula falsi; the three onsets give the answer by Richardson extrapolation and its error bar.
-The coarsest level scans the whole run (time 0 to time.end); each finer one starts from the coarser answer.
+The coarsest level scans the whole run (time 0 to time.end, or to the end of a swelling ramp, after which the
+bath and so its equilibrium states no longer change); each finer one starts from the coarser answer.
+
+Under compression the load is the applied strain (linear in time). Under swelling the states are the body's
+equilibria with the bath at mu_bar(t) (quasi-static swelling) and the load is reported as the flat state's
+growth and the bath potential; which comes first, crease or wrinkle, is then decided on the growth (a
+transient run's wrinkling onset is not at equilibrium at its time, its growth is the paper's measure).
 """
 
 from __future__ import annotations
@@ -53,22 +59,23 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None) -> dict:
     finest = cfg["stability"]["crease_resolution"]
     resolutions = [finest // LEVEL_RATIO ** k for k in (2, 1, 0)]
     settings = SolverSettings.from_config(cfg)
-    end = cfg["time"]["end"]
-    levels, found = [], None
+    fluid = cfg["stability"]["crease_fluid"]
+    levels, found, swelling = [], None, False
     for resolution in resolutions:
         setup = kind.crease_setup(cfg, comm, c / resolution, TIP_RADIUS * c)
         problem = factory.problem(cfg, comm, setup=setup)
-        trial = CreaseTrial(problem, c, settings, line=kind.crease_line(cfg))
+        trial = CreaseTrial(problem, c, settings, line=kind.crease_line(cfg), fluid=fluid)
+        swelling = trial.system.fluid != "frozen"
         surface = problem.materials[setup.material_under("permeable", comm)]
         mu = getattr(surface, config.law(cfg).stiffness)  # the energies are reported per mu c^2
         try:
-            level = _level(trial, found, end, mu * c * c, log)
+            level = _level(trial, found, problem.loading.load_end(), mu * c * c, log)
         finally:
             trial.destroy()
         level.update(resolution=resolution, tip_size_mm=c / resolution, cells=problem.cells())
         levels.append(level)
         log(f"creases: {resolution} elements along the trial crease ({problem.cells()} cells): "
-            + (f"onset at t = {level['time']:.6g} s (applied strain {level['applied_strain']:.5g})"
+            + (f"onset at t = {level['time']:.6g} s ({_load(level, swelling)})"
                if level["time"] is not None else "no onset up to time.end"))
         found = level["time"]
         if found is None:
@@ -78,14 +85,28 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None) -> dict:
         times = [lv["time"] for lv in levels]
         rich = richardson(times, LEVEL_RATIO)
         t, err = rich["converged"], rich["errors"][-1]
-        strain_rate = levels[-1]["applied_strain"] / levels[-1]["time"]  # the compression ramp is linear in t
-        onset = {"time": t, "time_error": err, "applied_strain": strain_rate * t,
-                 "applied_strain_error": abs(strain_rate) * err, "order": rich["order"],
-                 "position_mm": [kind.crease_line(cfg), _top(cfg)]}
+        onset = {"time": t, "time_error": err, "order": rich["order"], "position_mm": [kind.crease_line(cfg), _top(cfg)]}
+        if swelling:  # each level's flat growth at its onset, extrapolated like the times
+            growth = richardson([lv["growth_mm"] for lv in levels], LEVEL_RATIO)
+            mu_rate = (levels[-1]["mu_bar"] - levels[-2]["mu_bar"]) / (times[-1] - times[-2]) if times[-1] != times[-2] else 0.0
+            onset.update(growth_mm=growth["converged"], growth_error=growth["errors"][-1],
+                         mu_bar=levels[-1]["mu_bar"] + mu_rate * (t - times[-1]), mu_bar_error=abs(mu_rate) * err,
+                         fluid=fluid)
+        else:
+            strain_rate = levels[-1]["applied_strain"] / levels[-1]["time"]  # the compression ramp is linear in t
+            onset.update(applied_strain=strain_rate * t, applied_strain_error=abs(strain_rate) * err)
     return {"onset": onset, "crease_size_mm": c, "levels": levels,
-            "method": "trial crease of fixed size on the symmetry line (Hong, Zhao & Suo 2009)",
+            "method": "trial crease of fixed size on the symmetry line (Hong, Zhao & Suo 2009)"
+                      + (f"; states in equilibrium with the bath, grand potentials compared ({fluid})"
+                         if swelling else ""),
             "penetration_mm": max((e["penetration_mm"] for lv in levels for e in lv["trials"]
                                    if "penetration_mm" in e and e["difference"] > 0), default=0.0)}
+
+
+def _load(level: dict, swelling: bool) -> str:
+    if swelling:
+        return f"growth {level['growth_mm'] * 1e3:.5g} um, bath potential {level['mu_bar']:.5g} MPa"
+    return f"applied strain {level['applied_strain']:.5g}"
 
 
 def _top(cfg: dict) -> float:
@@ -107,12 +128,17 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
             log(f"  t = {t:.6g} s: {err}; counted as past the onset")
             trials.append({"time": t, "failed": str(err)})
             return -math.inf
-        trials.append({"time": t, "applied_strain": tr.applied_strain, "difference": tr.difference,
-                       "difference_per_mu_c2": tr.difference / scale, "penetration_mm": tr.penetration,
-                       "depth_mm": tr.depth, "substeps": tr.substeps})
-        log(f"  t = {t:.6g} s, applied strain {tr.applied_strain:.5g}: creased - flat energy = "
+        entry = {"time": t, "applied_strain": tr.applied_strain, "difference": tr.difference,
+                 "difference_per_mu_c2": tr.difference / scale, "penetration_mm": tr.penetration,
+                 "depth_mm": tr.depth, "substeps": tr.substeps}
+        if swelling:
+            entry.update(mu_bar=tr.mu_bar, growth_mm=tr.growth)
+        trials.append(entry)
+        log(f"  t = {t:.6g} s, {_load(entry, swelling)}: creased - flat energy = "
             f"{tr.difference / scale:+.5f} mu c^2, crease depth {tr.depth:.4g} mm")
         return tr.difference
+
+    swelling = trial.system.fluid != "frozen"
 
     try:
         bracket = _bracket(difference, guess, end)
@@ -148,8 +174,13 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
                     ga *= 0.5
                 side = "b"
         time = a - fa * (b - a) / (fb - fa) if math.isfinite(fb) else 0.5 * (a + b)
-    strain = trial.problem.loading.applied_strain(time) if time is not None else None
-    return {"time": time, "applied_strain": strain, "trials": trials}
+    loading = trial.problem.loading
+    level = {"time": time, "applied_strain": loading.applied_strain(time) if time is not None else None,
+             "trials": trials}
+    if swelling:  # the flat state's growth at the onset
+        level.update(mu_bar=loading.mu_bar(time) if time is not None else None,
+                     growth_mm=trial.flat_growth(time) if time is not None else None)
+    return level
 
 
 def _bracket(difference, guess: float | None, end: float):
@@ -189,10 +220,11 @@ def _positive_below(difference, t: float, end: float, step: float | None = None)
 
 
 def _first(onset: dict | None, critical: dict | None) -> str | None:
-    """Which comes first: "crease" or "wrinkle" (None: neither within the run)."""
+    """Which comes first: "crease" or "wrinkle" (None: neither within the run); under swelling by the growth."""
     if onset is None:
         return "wrinkle" if critical else None
-    if critical is None or onset["time"] < critical["time"]:
+    measure = "growth_mm" if "growth_mm" in onset else "time"
+    if critical is None or onset[measure] < critical[measure]:
         return "crease"
     return "wrinkle"
 
@@ -201,12 +233,21 @@ def describe(block: dict, critical: dict | None) -> str:
     onset = block["onset"]
     if onset is None:
         return "no trial crease has less energy than the flat state up to time.end"
-    line = (f"a crease has less energy than the flat surface from t = {onset['time']:.5g} +- "
-            f"{onset['time_error']:.2g} s (applied strain {onset['applied_strain']:.4g} +- "
-            f"{onset['applied_strain_error']:.2g})")
+    if "growth_mm" in onset:
+        line = (f"in equilibrium with the bath, a crease has less grand potential than the flat surface from a "
+                f"growth of {onset['growth_mm'] * 1e3:.5g} +- {onset['growth_error'] * 1e3:.2g} um (bath potential "
+                f"{onset['mu_bar']:.4g} MPa, t = {onset['time']:.5g} s, {onset['fluid']})")
+        measure, unit, scale = "growth_mm", "um", 1e3
+        at = "a growth of"
+    else:
+        line = (f"a crease has less energy than the flat surface from t = {onset['time']:.5g} +- "
+                f"{onset['time_error']:.2g} s (applied strain {onset['applied_strain']:.4g} +- "
+                f"{onset['applied_strain_error']:.2g})")
+        measure, unit, scale, at = "time", "s", 1.0, "t ="
     if critical is None:
         return line + "; no wrinkling onset within the run: the crease comes first"
+    where = f"the wrinkling onset at {at} {critical[measure] * scale:.5g} {unit}"
     if block["first"] == "crease":
-        return line + f", before the wrinkling onset at t = {critical['time']:.5g} s: the crease comes first"
-    return line + (f", after the wrinkling onset at t = {critical['time']:.5g} s "
-                   f"({onset['time'] / critical['time']:.3g} x its time): wrinkles come first")
+        return line + f", before {where}: the crease comes first"
+    return line + (f", after {where} ({onset[measure] / critical[measure]:.3g} x its "
+                   f"{'growth' if measure == 'growth_mm' else 'time'}): wrinkles come first")

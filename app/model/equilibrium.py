@@ -1,0 +1,129 @@
+"""Equilibrium states at a load, each with the energy that decides between them: what the trial crease
+(:mod:`app.onset.creases`) compares, a flat state against a creased one at the same load.
+
+- :class:`FrozenFluid`: a loading that moves no fluid (``compression``): the problem's own unknown (u, dQ)
+  and forms with every flux dof held, so a state at load t has no history and its energy is the stored
+  energy.
+- :class:`DrainedEquilibrium`: a swelling gel in equilibrium with its bath. The fluid content is free
+  wherever the bath reaches it, so at a bath potential mu_bar the equilibrium states are the stationary
+  points of the grand potential in (u, c), u in Q1 and c the fluid content gained in each cell (DG0):
+
+      G(u, c) = int psi(F, s0 + c) dV - mu_bar int c dV
+
+  (the law's constraint part at its own one-point rule, as in the incremental potential). Its
+  minimizer over c at fixed F is mu(F, s) = mu_bar in every cell, the drained state the incremental
+  potential's time steps reach when diffusion is fast against the load; its minimizer over u is
+  mechanical equilibrium. For an open system at fixed mu_bar, G is the energy whose difference decides
+  between two states (a crease's Maxwell point). With ``fluid = "undrained"`` a state reached from the flat
+  one keeps the flat state's content in every cell (c held): the crease then forms faster than fluid
+  can follow, and the difference of G is the difference of the stored energy.
+
+Both give the trial the same handles: ``w`` (the unknown), ``energy``, ``residual``, ``hessian`` (compiled
+forms), ``bcs`` (the fixed displacements), ``displacement`` (the x and y sub-spaces the crease's
+condition acts on), ``set_load(t)``, ``value()`` (the energy of ``w``), ``growth()``, and ``kept`` with
+``keep(flat)``: the conditions a state reached from the flat one keeps besides those, set from the flat
+state's array.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import ufl
+
+from app import compat
+from app.model.kinematics import deformation_gradient
+
+
+class FrozenFluid:
+    """The problem's own unknown and forms; the energy is the stored energy of the state in ``w``."""
+
+    fluid = "frozen"
+
+    def __init__(self, problem):
+        if problem.diffusion:
+            raise ValueError("a frozen-fluid state needs a loading without fluid motion (loading.kind = compression)")
+        p = self.problem = problem
+        self.w, self.bcs = p.w, p.bcs
+        self.energy, self.residual, self.hessian = p.forms.energy, p.forms.residual, p.forms.hessian
+        self.displacement = p.W.sub(0)
+
+    def set_load(self, t: float) -> None:
+        self.problem.set_time(t, 1.0)
+
+    def value(self) -> float:
+        p = self.problem
+        p.state.x.array[:] = p.w.x.array  # no fluid moves: Q stays 0, the state is w
+        return p.stored_energy()
+
+    def growth(self) -> float:
+        p = self.problem
+        p.state.x.array[:] = p.w.x.array
+        return p.growth()
+
+    kept: list = []
+
+    def keep(self, flat: np.ndarray) -> None:
+        pass
+
+
+class DrainedEquilibrium:
+    """The grand potential G(u, c) of a problem's body at the bath potential of its loading (module docstring);
+    ``fluid``: "drained" (c free in every state) or "undrained" (a state reached from the flat one keeps its
+    content)."""
+
+    def __init__(self, problem, fluid: str = "drained"):
+        if not problem.diffusion or problem.surface_measure is None:
+            raise ValueError("a drained equilibrium needs a loading whose bath reaches the body through a "
+                             "permeable surface (loading.kind = swelling)")
+        if fluid not in ("drained", "undrained"):
+            raise ValueError(f"fluid = {fluid!r}: allowed 'drained' or 'undrained'")
+        p = self.problem = problem
+        self.fluid = fluid
+        self.space = compat.mixed_displacement_content_space(p.domain)
+        self.w = compat.Function(self.space)  # (u, c): the stress-free reference state at c = 0
+        self.mu_bar = compat.Constant(p.domain, compat.ScalarType(p.loading.mu_bar(0.0)))
+        u, c = ufl.split(self.w)
+        bulk, constraint = p.mat.law.free_energy(deformation_gradient(u), p.mat.s0 + c, p.mat)
+        G = (bulk - self.mu_bar * c) * p.dx + constraint * p.dx_coupling
+        v, dv = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
+        residual = ufl.derivative(G, self.w, v)
+        self.energy, self.residual = compat.form(G), compat.form(residual)
+        self.hessian = compat.form(ufl.derivative(residual, self.w, dv))
+        self.bcs = p.fixed_displacement_conditions(self.space.sub(0))
+        self.displacement = self.space.sub(0)
+        self._V_u, self._u_dofs = compat.collapse(self.space.sub(0))
+        self.kept, self._content = [], None
+        if fluid == "undrained":  # every cell's content held at the flat state's
+            tdim = p.domain.topology.dim
+            imap = p.domain.topology.index_map(tdim)
+            cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+            bc, self._content = compat.dirichlet_function_on_facets(self.space.sub(1), cells, tdim)
+            self.kept = [bc]
+            _, self._c_dofs = compat.collapse(self.space.sub(1))
+
+    def set_load(self, t: float) -> None:
+        self.mu_bar.value = self.problem.loading.mu_bar(t)
+
+    def value(self) -> float:
+        return compat.assemble_scalar(self.energy, self.problem.comm)
+
+    def growth(self) -> float:
+        """The problem's growth measure of the displacement in ``w``."""
+        p = self.problem
+        ud = compat.Function(self._V_u)
+        ud.x.array[:] = self.w.x.array[self._u_dofs]
+        u = compat.Function(p.V_u)
+        compat.interpolate(u, ud)  # Q1 to Q1 on one mesh: node for node
+        p.state.x.array[:] = 0.0
+        p.state.x.array[p.u_dofs] = u.x.array
+        return p.growth()
+
+    def keep(self, flat: np.ndarray) -> None:
+        """Hold every cell's content at the flat state's (undrained; nothing held when drained)."""
+        if self._content is not None:
+            self._content.x.array[:] = flat[self._c_dofs]
+
+
+def equilibrium(problem, fluid: str = "drained"):
+    """The equilibrium states of a problem's loading: frozen fluid when no fluid moves, else the bath's."""
+    return FrozenFluid(problem) if not problem.diffusion else DrainedEquilibrium(problem, fluid)
