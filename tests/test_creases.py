@@ -37,11 +37,12 @@ def block(*overrides) -> dict:
     return config.resolve(BLOCK, list(overrides))
 
 
-def _trial(cfg, comm, size: float, resolution: int) -> tuple[CreaseTrial, float]:
+def _trial(cfg, comm, size: float, resolution: int, fluid: str = "drained") -> tuple[CreaseTrial, float]:
+    """The trial crease of length ``size`` x 1 mm (the block's and the swelling layer's thickness)."""
     kind = geometry.kind_of(cfg)
-    c = size * 1.0  # the block is 1 mm thick
+    c = size * 1.0
     p = factory.problem(cfg, comm, setup=kind.crease_setup(cfg, comm, c / resolution, 1.5 * c))
-    return CreaseTrial(p, c, SolverSettings.from_config(cfg)), c
+    return CreaseTrial(p, c, SolverSettings.from_config(cfg), fluid=fluid), c
 
 
 @long_physics

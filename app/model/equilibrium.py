@@ -32,6 +32,7 @@ import ufl
 
 from app import compat
 from app.model.kinematics import deformation_gradient
+from app.model.operators import displacement_in_problem_space
 
 
 class FrozenFluid:
@@ -110,12 +111,7 @@ class DrainedEquilibrium:
     def growth(self) -> float:
         """The problem's growth measure of the displacement in ``w``."""
         p = self.problem
-        ud = compat.Function(self._V_u)
-        ud.x.array[:] = self.w.x.array[self._u_dofs]
-        u = compat.Function(p.V_u)
-        compat.interpolate(u, ud)  # Q1 to Q1 on one mesh: node for node
-        p.state.x.array[:] = 0.0
-        p.state.x.array[p.u_dofs] = u.x.array
+        p.state.x.array[:] = displacement_in_problem_space(p, self._V_u, self._u_dofs, self.w.x.array)
         return p.growth()
 
     def keep(self, flat: np.ndarray) -> None:

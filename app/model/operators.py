@@ -117,14 +117,19 @@ class DrainedHessian:
     def to_problem_space(self, values: np.ndarray) -> np.ndarray:
         """A local array of this space -> the problem's local array of W with its displacement part (the
         flux part zero)."""
-        p = self.problem
-        ud = compat.Function(self._V_u)
-        ud.x.array[:] = values[self.u_dofs]
-        u = compat.Function(p.V_u)
-        compat.interpolate(u, ud)
-        out = np.zeros_like(p.state.x.array)
-        out[p.u_dofs] = u.x.array
-        return out
+        return displacement_in_problem_space(self.problem, self._V_u, self.u_dofs, values)
+
+
+def displacement_in_problem_space(problem, V_u, u_dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The displacement of a (u, c) array (``V_u`` its collapsed Q1 space, ``u_dofs`` their places in it) as
+    the problem's local array of W: Q1 to Q1 on one mesh, node for node; the flux part zero."""
+    ud = compat.Function(V_u)
+    ud.x.array[:] = values[u_dofs]
+    u = compat.Function(problem.V_u)
+    compat.interpolate(u, ud)
+    out = np.zeros_like(problem.state.x.array)
+    out[problem.u_dofs] = u.x.array
+    return out
 
 
 @dataclass

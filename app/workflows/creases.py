@@ -30,6 +30,8 @@ FAR = 4.0  # a negative end this many times larger than the positive one is not 
 MARCH = 0.03  # a finer level brackets its onset from the coarser one's in steps of this fraction of it
 LEVEL_RATIO = 2  # crease_resolution halves from one level to the next coarser one
 TIP_RADIUS = 1.5  # the finest elements reach this many crease lengths around the tip
+EQUILIBRIUM = 0.02  # under swelling, a wrinkling onset whose growth is this close to the equilibrium one at its
+# time (relative) was reached quasi-statically: only then do the trial's equilibrium states decide which is first
 
 
 def crease_length(cfg: dict) -> float:
@@ -42,25 +44,27 @@ def add_creases(summary: dict, cfg: dict, comm) -> None:
     reported there, the run's other results kept."""
     log = logging_setup.get()
     try:
-        block = crease_onset(cfg, comm, log.info)
+        block = crease_onset(cfg, comm, log.info, summary.get("critical"))
     except CreaseFailed as err:
         log.warning(f"creases: {err}")
         summary.setdefault("creases", {})["error"] = str(err)
         return
-    block["first"] = _first(block["onset"], summary.get("critical"))
+    block["first"] = _first(block["onset"], summary.get("critical"), block.get("wrinkling_equilibrium"))
     summary.setdefault("creases", {}).update(block)
     log.info("creases: " + describe(block, summary.get("critical")))
 
 
-def crease_onset(cfg: dict, comm, log=lambda msg: None) -> dict:
-    """The crease onset on every level and the extrapolated answer (a dict for summary.json)."""
+def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = None) -> dict:
+    """The crease onset on every level and the extrapolated answer (a dict for summary.json). Under swelling,
+    with the run's wrinkling onset ``critical``: also the equilibrium state's growth at its time
+    (``wrinkling_equilibrium``), which says whether that onset was reached quasi-statically."""
     kind = geometry.kind_of(cfg)
     c = crease_length(cfg)
     finest = cfg["stability"]["crease_resolution"]
     resolutions = [finest // LEVEL_RATIO ** k for k in (2, 1, 0)]
     settings = SolverSettings.from_config(cfg)
     fluid = cfg["stability"]["crease_fluid"]
-    levels, found, swelling = [], None, False
+    levels, found, swelling, wrinkling = [], None, False, None
     for resolution in resolutions:
         setup = kind.crease_setup(cfg, comm, c / resolution, TIP_RADIUS * c)
         problem = factory.problem(cfg, comm, setup=setup)
@@ -69,6 +73,9 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None) -> dict:
         surface = problem.materials[setup.material_under("permeable", comm)]
         mu = getattr(surface, config.law(cfg).stiffness)  # the energies are reported per mu c^2
         try:
+            if swelling and critical is not None and wrinkling is None:
+                at = min(critical["time"], problem.loading.load_end())
+                wrinkling = {"growth_mm": critical["growth_mm"], "equilibrium_growth_mm": trial.flat_growth(at)}
             level = _level(trial, found, problem.loading.load_end(), mu * c * c, log)
         finally:
             trial.destroy()
@@ -95,7 +102,8 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None) -> dict:
         else:
             strain_rate = levels[-1]["applied_strain"] / levels[-1]["time"]  # the compression ramp is linear in t
             onset.update(applied_strain=strain_rate * t, applied_strain_error=abs(strain_rate) * err)
-    return {"onset": onset, "crease_size_mm": c, "levels": levels,
+    extra = {"wrinkling_equilibrium": wrinkling} if wrinkling is not None else {}
+    return {"onset": onset, "crease_size_mm": c, "levels": levels, **extra,
             "method": "trial crease of fixed size on the symmetry line (Hong, Zhao & Suo 2009)"
                       + (f"; states in equilibrium with the bath, grand potentials compared ({fluid})"
                          if swelling else ""),
@@ -219,8 +227,12 @@ def _positive_below(difference, t: float, end: float, step: float | None = None)
             return t, f
 
 
-def _first(onset: dict | None, critical: dict | None) -> str | None:
-    """Which comes first: "crease" or "wrinkle" (None: neither within the run); under swelling by the growth."""
+def _first(onset: dict | None, critical: dict | None, wrinkling: dict | None = None) -> str | None:
+    """Which comes first: "crease" or "wrinkle" (None: neither within the run, or, under swelling, a wrinkling
+    onset away from equilibrium with the bath, which the trial's equilibrium states cannot be compared with);
+    under swelling by the growth."""
+    if wrinkling is not None and not quasi_static(wrinkling):
+        return None
     if onset is None:
         return "wrinkle" if critical else None
     measure = "growth_mm" if "growth_mm" in onset else "time"
@@ -229,21 +241,36 @@ def _first(onset: dict | None, critical: dict | None) -> str | None:
     return "wrinkle"
 
 
-def describe(block: dict, critical: dict | None) -> str:
-    onset = block["onset"]
+def quasi_static(wrinkling: dict) -> bool:
+    """Whether a swelling run's wrinkling onset was in equilibrium with the bath (its growth within
+    EQUILIBRIUM of the equilibrium state's at its time)."""
+    eq = wrinkling["equilibrium_growth_mm"]
+    return abs(wrinkling["growth_mm"] - eq) <= EQUILIBRIUM * abs(eq)
+
+
+def _onset_line(onset: dict | None) -> str:
     if onset is None:
         return "no trial crease has less energy than the flat state up to time.end"
     if "growth_mm" in onset:
-        line = (f"in equilibrium with the bath, a crease has less grand potential than the flat surface from a "
+        return (f"in equilibrium with the bath, a crease has less grand potential than the flat surface from a "
                 f"growth of {onset['growth_mm'] * 1e3:.5g} +- {onset['growth_error'] * 1e3:.2g} um (bath potential "
                 f"{onset['mu_bar']:.4g} MPa, t = {onset['time']:.5g} s, {onset['fluid']})")
-        measure, unit, scale = "growth_mm", "um", 1e3
-        at = "a growth of"
-    else:
-        line = (f"a crease has less energy than the flat surface from t = {onset['time']:.5g} +- "
-                f"{onset['time_error']:.2g} s (applied strain {onset['applied_strain']:.4g} +- "
-                f"{onset['applied_strain_error']:.2g})")
-        measure, unit, scale, at = "time", "s", 1.0, "t ="
+    return (f"a crease has less energy than the flat surface from t = {onset['time']:.5g} +- "
+            f"{onset['time_error']:.2g} s (applied strain {onset['applied_strain']:.4g} +- "
+            f"{onset['applied_strain_error']:.2g})")
+
+
+def describe(block: dict, critical: dict | None) -> str:
+    onset = block["onset"]
+    line = _onset_line(onset)
+    wrinkling = block.get("wrinkling_equilibrium")
+    if wrinkling is not None and not quasi_static(wrinkling):
+        return line + (f"; the run's wrinkling onset (growth {wrinkling['growth_mm'] * 1e3:.5g} um) is far from "
+                       f"equilibrium with the bath (there: {wrinkling['equilibrium_growth_mm'] * 1e3:.5g} um), so "
+                       "these equilibrium states do not say which comes first (a quasi-static ramp would)")
+    if onset is None:
+        return line
+    measure, unit, scale, at = ("growth_mm", "um", 1e3, "a growth of") if "growth_mm" in onset else ("time", "s", 1.0, "t =")
     if critical is None:
         return line + "; no wrinkling onset within the run: the crease comes first"
     where = f"the wrinkling onset at {at} {critical[measure] * scale:.5g} {unit}"
