@@ -14,8 +14,9 @@ import pytest
 from conftest import long_physics
 
 from app import config, factory, geometry
-from app.onset.creases import CreaseFailed, CreaseTrial
+from app.onset.creases import CreaseFailed, CreaseTrial, FlatFailed
 from app.solvers.newton import SolverSettings
+from app.workflows import creases as workflow
 from app.workflows.pipeline import run_case
 
 HZS_STRAIN = 0.354  # Hong, Zhao & Suo 2009: incompressible neo-Hookean half-space, plane-strain compression
@@ -135,3 +136,50 @@ def test_a_trial_that_fails_is_reported_and_the_run_kept(shared_tmp, comm, monke
     s = run_case(cfg, shared_tmp, comm, progress=False)
     assert s["status"] == "stable"  # no linear onset up to a strain of 0.12
     assert s["creases"] == {"error": "the trial crease did not close at t = 0.025 s (test)"}
+
+
+def test_a_bracket_that_ends_in_a_snap_bounds_the_onset_from_above():
+    """A trial crease whose energy difference jumps from positive to far negative while its crease becomes
+    ten times deeper has snapped onto a larger fold (measured on a film 1.5 times stiffer than its
+    substrate, c = h/4: +0.126 mu c^2 at depth 0.029 mm, -19.8 at 0.286 mm, strain 0.3110 against
+    0.3108): that load is no sign change of the trial's energy, only an upper bound of the onset. A genuine
+    crossing (the swelling layer's: +0.0029 at depth 0.1627, -0.0021 at 0.1664) is not a snap; a failed
+    trial at the negative end is."""
+    snapped = [{"time": 0.621582, "difference": 1.26e-5, "depth_mm": 0.02924},
+               {"time": 0.62207, "difference": -1.98e-3, "depth_mm": 0.2863}]
+    assert workflow._snapped(snapped, 0.621582, 0.62207)
+    genuine = [{"time": 9735.71, "difference": 2.9e-4, "depth_mm": 0.1627},
+               {"time": 9736.33, "difference": -2.1e-4, "depth_mm": 0.1664}]
+    assert not workflow._snapped(genuine, 9735.71, 9736.33)
+    failed = [genuine[0], {"time": 9736.33, "failed": "did not close"}]
+    assert workflow._snapped(failed, 9735.71, 9736.33)
+    # the onset is then the finest level's snap load, an upper bound: a crease before a wrinkle stays
+    # "crease", one after it decides nothing; the log line says "at most"
+    bound = workflow._extrapolated([0.64, 0.625, 0.6216], snap=True)
+    assert bound["converged"] == 0.6216 and bound["order"] is None
+    assert bound["errors"][-1] == pytest.approx(0.0034)
+    onset = {"time": 0.6216, "time_error": 0.0034, "applied_strain": 0.3108, "applied_strain_error": 0.0017,
+             "snap": True}
+    assert workflow._first(onset, {"time": 0.7282}) == "crease"
+    assert workflow._first(onset, {"time": 0.5}) is None
+    line = workflow.describe({"onset": onset, "first": "crease"}, {"time": 0.7282})
+    assert "from at most t = 0.6216" in line and "snaps" in line and "\n" not in line
+
+
+def test_a_flat_state_that_cannot_be_solved_ends_the_level_instead_of_counting_as_past_the_onset():
+    """A trial whose creased state cannot be held counts as past the onset (far past it the crease runs
+    away); a load whose flat state does not converge says nothing about the crease and must not bracket an
+    onset (a swelling layer's flat state followed back down once failed and put a spurious onset where the
+    energy difference was +0.64 mu c^2): the level ends with FlatFailed, reported in creases.error."""
+    from types import SimpleNamespace
+
+    calls = []
+
+    def trial(t):
+        calls.append(t)
+        raise FlatFailed(f"the flat state did not converge at t = {t:.6g} s (test)")
+
+    fake = SimpleNamespace(trial=trial, system=SimpleNamespace(fluid="frozen"))
+    with pytest.raises(FlatFailed, match="flat state did not converge"):
+        workflow._level(fake, None, 1.0, 1.0, lambda msg: None)
+    assert calls == [0.125]  # the first load of the scan, not a march downwards from it

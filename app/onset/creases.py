@@ -44,6 +44,10 @@ class CreaseFailed(RuntimeError):
     """The creased state could not be reached (one line: where and why)."""
 
 
+class FlatFailed(CreaseFailed):
+    """The flat state could not be solved: nothing is known about the crease at that load."""
+
+
 @dataclass
 class Trial:
     """One trial at load time t: the energies of the flat and creased states and the creased state's shape."""
@@ -96,20 +100,22 @@ class CreaseTrial:
         self.flat_solver = NewtonSolver(sys.residual, sys.hessian, sys.bcs, sys.w, settings, p.comm)
         self.crease_solver = MinimizingNewton(sys.energy, sys.residual, sys.hessian,
                                               sys.bcs + [self.bc] + sys.kept, sys.w, settings, p.comm)
-        self._flat = sys.w.x.array.copy()  # the last flat state and its load time
-        self._flat_time = 0.0
+        self._flat = sys.w.x.array.copy()  # the last flat state
+        self._solved = {0.0: self._flat}  # every flat state solved, by load time
         self._growth = 0.0
 
     def flat_state(self, t: float) -> float:
-        """Solve the flat state at load time t (followed from the last one in small load steps, a step that
-        fails halved); its energy."""
+        """Solve the flat state at load time t (followed in small load steps from the solved one at the
+        nearest load at or below t, so always forwards in the load: a swelling gel's flat state is not
+        reliably followed back down; a step that fails is halved); its energy."""
         p, sys = self.problem, self.system
         lo = p.loading
-        strain_change = abs(lo.applied_strain(t) - lo.applied_strain(self._flat_time))
+        start = max(tk for tk in self._solved if tk <= t)
+        strain_change = abs(lo.applied_strain(t) - lo.applied_strain(start))
         steps = max(1, int(np.ceil(strain_change / FLAT_STRAIN_STEP)))
-        sys.w.x.array[:] = self._flat
-        targets = list(np.linspace(self._flat_time, t, steps + 1)[1:])
-        done, halvings = self._flat_time, 0
+        sys.w.x.array[:] = self._solved[start]
+        targets = list(np.linspace(start, t, steps + 1)[1:]) if t > start else []
+        done, halvings = start, 0
         while targets:
             tk = float(targets[0])
             before = sys.w.x.array.copy()
@@ -121,10 +127,11 @@ class CreaseTrial:
             sys.w.x.array[:] = before
             halvings += 1
             if halvings > FLAT_HALVINGS:
-                raise CreaseFailed(f"the flat state did not converge at t = {tk:.6g} s (SNES reason {res.reason}, "
-                                   f"load steps halved {FLAT_HALVINGS} times from t = {done:.6g} s)")
+                raise FlatFailed(f"the flat state did not converge at t = {tk:.6g} s (SNES reason {res.reason}, "
+                                 f"load steps halved {FLAT_HALVINGS} times from t = {done:.6g} s)")
             targets.insert(0, 0.5 * (done + tk))
-        self._flat, self._flat_time = sys.w.x.array.copy(), t
+        sys.set_load(t)  # the load of the state in w (also when it was solved before)
+        self._flat = self._solved[t] = sys.w.x.array.copy()
         self._growth = sys.growth()
         return sys.value()
 

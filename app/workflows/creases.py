@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 
 from app import config, factory, geometry, logging_setup
-from app.onset.creases import CreaseFailed, CreaseTrial
+from app.onset.creases import CreaseFailed, CreaseTrial, FlatFailed
 from app.solvers.newton import SolverSettings
 from app.workflows.convergence import richardson
 
@@ -27,6 +27,7 @@ BISECTIONS = 2  # the bracket is halved this often before regula falsi (its far 
 FALSI_STEPS = 6  # at most this many Illinois regula falsi steps after that, until the bracket is within
 TOLERANCE = 2e-4  # this fraction of its load
 FAR = 4.0  # a negative end this many times larger than the positive one is not interpolated towards
+SNAP = 2.0  # a bracket whose negative end's crease is this many times deeper (or failed) ends in a snap
 MARCH = 0.03  # a finer level brackets its onset from the coarser one's in steps of this fraction of it
 LEVEL_RATIO = 2  # crease_resolution halves from one level to the next coarser one
 TIP_RADIUS = 1.5  # the finest elements reach this many crease lengths around the tip
@@ -90,11 +91,14 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
     onset = None
     if found is not None:
         times = [lv["time"] for lv in levels]
-        rich = richardson(times, LEVEL_RATIO)
+        snap = any(lv.get("snap") for lv in levels)
+        rich = _extrapolated(times, snap)
         t, err = rich["converged"], rich["errors"][-1]
         onset = {"time": t, "time_error": err, "order": rich["order"], "position_mm": [kind.crease_line(cfg), _top(cfg)]}
+        if snap:
+            onset["snap"] = True
         if swelling:  # each level's flat growth at its onset, extrapolated like the times
-            growth = richardson([lv["growth_mm"] for lv in levels], LEVEL_RATIO)
+            growth = _extrapolated([lv["growth_mm"] for lv in levels], snap)
             mu_rate = (levels[-1]["mu_bar"] - levels[-2]["mu_bar"]) / (times[-1] - times[-2]) if times[-1] != times[-2] else 0.0
             onset.update(growth_mm=growth["converged"], growth_error=growth["errors"][-1],
                          mu_bar=levels[-1]["mu_bar"] + mu_rate * (t - times[-1]), mu_bar_error=abs(mu_rate) * err,
@@ -109,6 +113,14 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
                          if swelling else ""),
             "penetration_mm": max((e["penetration_mm"] for lv in levels for e in lv["trials"]
                                    if "penetration_mm" in e and e["difference"] > 0), default=0.0)}
+
+
+def _extrapolated(values: list, snap: bool) -> dict:
+    """Richardson over the levels; a snap's loads are upper bounds, not a converging sequence: the finest one,
+    with its distance from the next coarser as the error."""
+    if snap:
+        return {"converged": values[-1], "errors": [abs(values[-1] - values[-2])], "order": None}
+    return richardson(values, LEVEL_RATIO)
 
 
 def _load(level: dict, swelling: bool) -> str:
@@ -132,6 +144,8 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
     def difference(t: float) -> float:
         try:
             tr = trial.trial(t)
+        except FlatFailed:  # no flat state, no comparison: the level cannot be completed
+            raise
         except CreaseFailed as err:
             log(f"  t = {t:.6g} s: {err}; counted as past the onset")
             trials.append({"time": t, "failed": str(err)})
@@ -155,7 +169,7 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
         if failed and len(failed) == len(trials):  # not one trial completed: that is the reason
             raise CreaseFailed(failed[0]) from None
         raise
-    time = None
+    time, snap = None, False
     if bracket is not None:
         (a, fa), (b, fb) = bracket
         for _ in range(BISECTIONS):
@@ -182,13 +196,28 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
                     ga *= 0.5
                 side = "b"
         time = a - fa * (b - a) / (fb - fa) if math.isfinite(fb) else 0.5 * (a + b)
+        snap = _snapped(trials, a, b)
     loading = trial.problem.loading
     level = {"time": time, "applied_strain": loading.applied_strain(time) if time is not None else None,
              "trials": trials}
+    if time is not None and snap:
+        level["snap"] = True
+        log(f"  the trial crease snaps at t = {time:.6g} s to a fold far deeper than itself (or cannot be held) "
+            f"while its energy difference is still {fa / scale:+.3g} mu c^2: a larger crease has less energy "
+            "there, so this load bounds the onset from above")
     if swelling:  # the flat state's growth at the onset
         level.update(mu_bar=loading.mu_bar(time) if time is not None else None,
                      growth_mm=trial.flat_growth(time) if time is not None else None)
     return level
+
+
+def _snapped(trials: list, a: float, b: float) -> bool:
+    """Whether the final bracket [a, b] ends in a snap rather than a sign change of one crease's energy: at b
+    the trial failed, or its crease is SNAP times deeper than at a (the free surface beyond the trial
+    crease has folded onto the line: a larger crease)."""
+    at = {tr["time"]: tr for tr in trials}
+    ta, tb = at[a], at[b]
+    return "failed" in tb or tb["depth_mm"] > SNAP * ta["depth_mm"]
 
 
 def _bracket(difference, guess: float | None, end: float):
@@ -238,7 +267,7 @@ def _first(onset: dict | None, critical: dict | None, wrinkling: dict | None = N
     measure = "growth_mm" if "growth_mm" in onset else "time"
     if critical is None or onset[measure] < critical[measure]:
         return "crease"
-    return "wrinkle"
+    return None if onset.get("snap") else "wrinkle"  # an upper bound above the wrinkling onset decides nothing
 
 
 def quasi_static(wrinkling: dict) -> bool:
@@ -251,6 +280,10 @@ def quasi_static(wrinkling: dict) -> bool:
 def _onset_line(onset: dict | None) -> str:
     if onset is None:
         return "no trial crease has less energy than the flat state up to time.end"
+    if onset.get("snap"):
+        return _onset_line({**onset, "snap": False}).replace(" from ", " from at most ", 1) + (
+            " (the trial crease snaps there to a far deeper fold: a larger crease has less energy, the onset is "
+            "at or below this load)")
     if "growth_mm" in onset:
         return (f"in equilibrium with the bath, a crease has less grand potential than the flat surface from a "
                 f"growth of {onset['growth_mm'] * 1e3:.5g} +- {onset['growth_error'] * 1e3:.2g} um (bath potential "
