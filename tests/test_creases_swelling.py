@@ -145,7 +145,7 @@ def test_a_swelling_layer_creases_undrained_at_hong_zhao_suos_stretch(shared_tmp
     for tr in s["creases"]["levels"][-1]["trials"]:
         if "growth_mm" in tr:
             assert 1.0 + tr["growth_mm"] / H == pytest.approx(theory.constrained_layer_stretch(mat, tr["mu_bar"]),
-                                                             rel=1e-9)
+                                                             rel=1e-8)  # measured 4e-9: Newton's tolerance
 
 
 def test_which_comes_first_is_left_open_for_a_wrinkling_onset_away_from_equilibrium():
