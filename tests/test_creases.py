@@ -6,6 +6,8 @@
   crease size drops out of the onset): f = dPi / (mu c^2) for c and c/2 on meshes of the same relative size;
 - 1 and 2 ranks give the same trial energies; the trial does not cross the symmetry line before the onset;
 - a config the trial cannot serve (a tube) is refused with one line; a trial that fails keeps the run's results.
+- a bracket that ends in a snap (a far deeper fold) bounds the onset from above; a flat state that cannot be
+  solved ends the level instead of counting as past the onset.
 """
 
 from __future__ import annotations

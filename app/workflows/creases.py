@@ -99,10 +99,9 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
             onset["snap"] = True
         if swelling:  # each level's flat growth at its onset, extrapolated like the times
             growth = _extrapolated([lv["growth_mm"] for lv in levels], snap)
-            mu_rate = (levels[-1]["mu_bar"] - levels[-2]["mu_bar"]) / (times[-1] - times[-2]) if times[-1] != times[-2] else 0.0
-            onset.update(growth_mm=growth["converged"], growth_error=growth["errors"][-1],
-                         mu_bar=levels[-1]["mu_bar"] + mu_rate * (t - times[-1]), mu_bar_error=abs(mu_rate) * err,
-                         fluid=fluid)
+            mu_bar = problem.loading.mu_bar
+            onset.update(growth_mm=growth["converged"], growth_error=growth["errors"][-1], mu_bar=mu_bar(t),
+                         mu_bar_error=abs(mu_bar(t + err) - mu_bar(t)), fluid=fluid)
         else:
             strain_rate = levels[-1]["applied_strain"] / levels[-1]["time"]  # the compression ramp is linear in t
             onset.update(applied_strain=strain_rate * t, applied_strain_error=abs(strain_rate) * err)
@@ -140,6 +139,7 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
     far below zero against the positive one). A load where the crease cannot be
     held at its size (the solve fails: far past the onset, the crease runs away) counts as past the onset."""
     trials = []
+    swelling = trial.system.fluid != "frozen"
 
     def difference(t: float) -> float:
         try:
@@ -159,8 +159,6 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
         log(f"  t = {t:.6g} s, {_load(entry, swelling)}: creased - flat energy = "
             f"{tr.difference / scale:+.5f} mu c^2, crease depth {tr.depth:.4g} mm")
         return tr.difference
-
-    swelling = trial.system.fluid != "frozen"
 
     try:
         bracket = _bracket(difference, guess, end)
@@ -200,7 +198,7 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
     loading = trial.problem.loading
     level = {"time": time, "applied_strain": loading.applied_strain(time) if time is not None else None,
              "trials": trials}
-    if time is not None and snap:
+    if snap:
         level["snap"] = True
         log(f"  the trial crease snaps at t = {time:.6g} s to a fold far deeper than itself (or cannot be held) "
             f"while its energy difference is still {fa / scale:+.3g} mu c^2: a larger crease has less energy "
