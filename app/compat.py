@@ -264,6 +264,17 @@ def dirichlet_function_on_facets(W_sub, facets: np.ndarray, fdim: int):
     return dirichlet_zero_on_facets(W_sub, facets, fdim)
 
 
+def dirichlet_function_on_cells(W_sub, domain):
+    """Dirichlet condition on every local cell's dofs of a (cell-wise, e.g. DG0) sub-space, its values from a
+    Function the caller sets: (condition, function). dolfinx 0.9 locates dofs on cells only once the
+    cell-to-cell connectivity exists (0.5 does not ask for it)."""
+    tdim = domain.topology.dim
+    domain.topology.create_connectivity(tdim, tdim)
+    imap = domain.topology.index_map(tdim)
+    cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+    return dirichlet_zero_on_facets(W_sub, cells, tdim)
+
+
 def locate_dofs_on_facets(V, fdim: int, facets: np.ndarray) -> np.ndarray:
     """Local dofs of a (collapsed) space V on the given facets."""
     return np.asarray(fem.locate_dofs_topological(V, fdim, facets), dtype=np.int32)

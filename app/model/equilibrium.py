@@ -95,10 +95,7 @@ class DrainedEquilibrium:
         self._V_u, self._u_dofs = compat.collapse(self.space.sub(0))
         self.kept, self._content = [], None
         if fluid == "undrained":  # every cell's content held at the flat state's
-            tdim = p.domain.topology.dim
-            imap = p.domain.topology.index_map(tdim)
-            cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
-            bc, self._content = compat.dirichlet_function_on_facets(self.space.sub(1), cells, tdim)
+            bc, self._content = compat.dirichlet_function_on_cells(self.space.sub(1), p.domain)
             self.kept = [bc]
             _, self._c_dofs = compat.collapse(self.space.sub(1))
 
