@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import pytest
 from conftest import long_physics
+from test_creases import BLOCK
 from test_creases import _trial as crease_trial
 
 from app import config, factory
@@ -34,16 +35,12 @@ HZS_STRAIN = 0.354  # Hong, Zhao & Suo 2009: incompressible neo-Hookean half-spa
 HZS_RATIO = 1.0 / (1.0 - HZS_STRAIN) ** 2  # the same crease as a ratio of principal stretches: 2.396
 H = 1.0  # the layer's thickness [mm]
 
-LAYER = {
-    "geometry": {"length": 1.0, "substrate_thickness": 0.95, "film_thickness": 0.05},
-    "mesh": {"element_size": 0.05, "film_layers": 3, "substrate_grading": 1.1},
-    "material": {"mobility": 1.0, "film": {"modulus_ratio": 1.0}},
-    "loading": {"kind": "swelling", "ramp_time": 1.0e4, "chemical_potential": 0.0},
-    "time": {"end": 1.0e4, "dt_initial": 0.1, "dt_max": 200.0},
-    "stability": {"error_estimate": False, "crease_size": 0.05, "crease_resolution": 8},
-    "output": {"fields": False, "plot": False},
-    "reduced": {"beside_2d": False},
-}
+# the compressed block of tests/test_creases.py (geometry, mesh, outputs), swelling quasi-statically instead
+LAYER = {**BLOCK,
+         "material": {"mobility": 1.0, "film": {"modulus_ratio": 1.0}},
+         "loading": {"kind": "swelling", "ramp_time": 1.0e4, "chemical_potential": 0.0},
+         "time": {"end": 1.0e4, "dt_initial": 0.1, "dt_max": 200.0},
+         "stability": {**BLOCK["stability"], "crease_resolution": 8}}
 
 
 def layer(*overrides) -> dict:
