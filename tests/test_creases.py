@@ -91,28 +91,33 @@ def test_the_trial_energy_scales_with_the_crease_size_squared(comm):
 def test_a_trial_is_the_same_on_one_and_two_ranks(comm):
     """The flat and creased energies of one trial (strain 0.33, 8 elements along the crease): equal on 1
     and 2 ranks (the serial values are recomputed on rank 0 alone in the 2-rank session) to 1e-8."""
+    got = same_on_one_and_all_ranks(block(), comm, 0.55)
+    assert got.penetration == 0.0 and got.depth > 0.05  # folded below the surface, deeper than c
+
+
+def same_on_one_and_all_ranks(cfg, comm, t: float, fluid: str = "drained"):
+    """One trial at load time t (c = 0.05 mm, 8 elements along it) on ``comm``; on more than one rank its
+    flat and creased energies equal, to 1e-8, the same trial's on rank 0 alone. Returns the trial."""
     from mpi4py import MPI
 
-    cfg = block()
-    trial, _ = _trial(cfg, comm, 0.05, 8)
+    trial, _ = _trial(cfg, comm, 0.05, 8, fluid)
     try:
-        got = trial.trial(0.55)
+        got = trial.trial(t)
     finally:
         trial.destroy()
-    assert got.penetration == 0.0 and got.depth > 0.05  # folded below the surface, deeper than c
-    if comm.size == 1:
-        return
-    ref = None
-    if comm.rank == 0:
-        alone, _ = _trial(cfg, MPI.COMM_SELF, 0.05, 8)
-        try:
-            r = alone.trial(0.55)
-            ref = (r.flat_energy, r.creased_energy)
-        finally:
-            alone.destroy()
-    ref = comm.bcast(ref, root=0)
-    assert got.flat_energy == pytest.approx(ref[0], rel=1e-8)
-    assert got.creased_energy == pytest.approx(ref[1], rel=1e-8)
+    if comm.size > 1:
+        ref = None
+        if comm.rank == 0:
+            alone, _ = _trial(cfg, MPI.COMM_SELF, 0.05, 8, fluid)
+            try:
+                r = alone.trial(t)
+                ref = (r.flat_energy, r.creased_energy)
+            finally:
+                alone.destroy()
+        ref = comm.bcast(ref, root=0)
+        assert got.flat_energy == pytest.approx(ref[0], rel=1e-8)
+        assert got.creased_energy == pytest.approx(ref[1], rel=1e-8)
+    return got
 
 
 def test_a_config_the_trial_cannot_serve_is_refused_naming_the_key():

@@ -24,6 +24,7 @@ import pytest
 from conftest import long_physics
 from test_creases import BLOCK
 from test_creases import _trial as crease_trial
+from test_creases import same_on_one_and_all_ranks
 
 from app import config, factory
 from app.model import theory
@@ -71,29 +72,9 @@ def test_a_drained_trial_is_the_same_on_one_and_two_ranks(comm):
     """The flat and creased grand potentials of one drained trial (stretch 2.29, 8 elements along the
     crease): equal on 1 and 2 ranks (the serial values recomputed on rank 0 alone) to 1e-8; the crease
     folds below the surface, deeper than its length, without crossing the symmetry line."""
-    from mpi4py import MPI
-
-    cfg = layer()
-    trial = _trial(cfg, comm, 8)
-    try:
-        got = trial.trial(9700.0)
-    finally:
-        trial.destroy()
+    got = same_on_one_and_all_ranks(layer(), comm, 9700.0)
     assert got.penetration == 0.0 and got.depth > 0.05
     assert got.difference > 0  # below the onset
-    if comm.size == 1:
-        return
-    ref = None
-    if comm.rank == 0:
-        alone = _trial(cfg, MPI.COMM_SELF, 8)
-        try:
-            r = alone.trial(9700.0)
-            ref = (r.flat_energy, r.creased_energy)
-        finally:
-            alone.destroy()
-    ref = comm.bcast(ref, root=0)
-    assert got.flat_energy == pytest.approx(ref[0], rel=1e-8)
-    assert got.creased_energy == pytest.approx(ref[1], rel=1e-8)
 
 
 def test_the_drained_crease_costs_less_than_the_undrained_one_and_comes_first(comm):
