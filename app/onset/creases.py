@@ -102,19 +102,23 @@ class CreaseTrial:
                                               sys.bcs + [self.bc] + sys.kept, sys.w, settings, p.comm)
         self._flat = sys.w.x.array.copy()  # the last flat state
         self._solved = {0.0: self._flat}  # every flat state solved, by load time
+        self._last = 0.0  # the load time of the last one
         self._growth = 0.0
 
     def flat_state(self, t: float) -> float:
-        """Solve the flat state at load time t (followed in small load steps from the solved one at the
-        nearest load at or below t, so always forwards in the load: a swelling gel's flat state is not
-        reliably followed back down; a step that fails is halved); its energy."""
+        """Solve the flat state at load time t, followed in small load steps (a step that fails is halved):
+        with frozen fluid from the last flat state, as the load goes; in equilibrium with a bath from the
+        solved one at the nearest load at or below t, so always forwards in the load (a swelling gel's flat
+        state is not reliably followed back down). Its energy."""
         p, sys = self.problem, self.system
         lo = p.loading
-        start = max(tk for tk in self._solved if tk <= t)
+        # frozen fluid: from the last flat state, up or down in the applied strain (a path-independent
+        # elastic state); in equilibrium with a bath: forwards only
+        start = self._last if sys.fluid == "frozen" else max(tk for tk in self._solved if tk <= t)
         strain_change = abs(lo.applied_strain(t) - lo.applied_strain(start))
         steps = max(1, int(np.ceil(strain_change / FLAT_STRAIN_STEP)))
         sys.w.x.array[:] = self._solved[start]
-        targets = list(np.linspace(start, t, steps + 1)[1:]) if t > start else []
+        targets = list(np.linspace(start, t, steps + 1)[1:]) if t != start else []
         done, halvings = start, 0
         while targets:
             tk = float(targets[0])
@@ -132,6 +136,7 @@ class CreaseTrial:
             targets.insert(0, 0.5 * (done + tk))
         sys.set_load(t)  # the load of the state in w (also when it was solved before)
         self._flat = self._solved[t] = sys.w.x.array.copy()
+        self._last = t
         self._growth = sys.growth()
         return sys.value()
 
