@@ -59,6 +59,40 @@ def _quiet_logging():
     logging_setup.setup(MPI.COMM_WORLD, logging.WARNING)
 
 
+class _Lines(logging.Handler):
+    def __init__(self):
+        super().__init__()
+        self.lines = []
+
+    def emit(self, record):
+        self.lines.append(record.getMessage())
+
+
+@pytest.fixture
+def log_lines(monkeypatch):
+    """The INFO lines hydrobuckle's log shows during a test (rank 0; the other ranks log nothing), also
+    of a command that sets its logging up again (``cli.main``, with -q or not)."""
+    handler = _Lines()
+
+    def attach():
+        log = logging_setup.get()
+        log.addHandler(handler)
+        if MPI.COMM_WORLD.rank == 0:
+            log.setLevel(logging.INFO)
+        return log
+
+    setup = logging_setup.setup
+
+    def setup_and_attach(comm, level=logging.INFO):
+        setup(comm, level)
+        return attach()
+
+    monkeypatch.setattr(logging_setup, "setup", setup_and_attach)
+    attach()
+    yield handler.lines
+    setup(MPI.COMM_WORLD, logging.WARNING)
+
+
 def small_bilayer(**overrides) -> dict:
     """A small, fast bilayer config (0.1 mm wide, 0.05 mm substrate); dotted-key overrides."""
     user = {

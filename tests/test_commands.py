@@ -153,9 +153,13 @@ def test_level_meshes_have_the_element_sizes_of_their_configs(comm):
 # --- converge: end to end -------------------------------------------------------------------------
 
 
-def test_converge_time_two_levels_end_to_end(shared_tmp, comm):
+def test_converge_time_two_levels_end_to_end(shared_tmp, comm, log_lines):
     cfg_path, out = write_on_rank0(shared_tmp / "tiny.toml", TINY), shared_tmp / "conv"
     assert cli.main(["converge", str(cfg_path), "--only", "time", "--levels", "2", "-o", str(out), "-q"]) == 0
+    if comm.rank == 0:  # after each level: levels done of the total and the time left
+        done = [line for line in log_lines if " levels done" in line]
+        assert [line.split(";")[0] for line in done] == ["converge: 1/2 levels done", "converge: 2/2 levels done"]
+        assert "left" in done[0] and done[1].endswith("none left")
     doc = read_json(out / "convergence.json")
     assert doc["direction"] == "refine" and list(doc["studies"]) == ["time"]
     base_cfg = config.load(cfg_path)

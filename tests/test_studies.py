@@ -21,12 +21,25 @@ def _g(rows):
     return [r["g_c_um"] for r in rows]
 
 
-def test_sweep_is_resumable_and_writes_tables(shared_tmp, comm):
+def test_sweep_is_resumable_and_writes_tables(shared_tmp, comm, log_lines):
     out = shared_tmp / "sweep"
     rows, cases = _sweep(out, comm, "material.film.modulus_ratio", [6.0, 12.0])
     assert [r["status"] for r in rows] == ["buckled", "buckled"]
+    if comm.rank == 0:  # the progress a user waits with: cases done of the total, the time left
+        counts = [line.split(";")[0] for line in log_lines if " cases done" in line]
+        # 2 ranks: one case per group; rank 0's line counts the other group's case if it ended first
+        assert counts == (["study: 1/2 cases done", "study: 2/2 cases done"] if comm.size == 1
+                          else [counts[0]]) and counts[0] in ("study: 1/2 cases done", "study: 2/2 cases done")
+        assert log_lines[0] == f"study: 2 cases on {comm.size} group(s) of 1 rank(s)"
+        if comm.size == 1:
+            first = next(line for line in log_lines if "1/2 cases done" in line)
+            assert "left (" in first and "a case)" in first
+            assert log_lines[-1].endswith("2/2 cases done; none left")
+        log_lines.clear()
     stamps = [(c.outdir / "summary.json").stat().st_mtime_ns for c in cases]
     rows2, _ = _sweep(out, comm, "material.film.modulus_ratio", [6.0, 12.0])
+    if comm.rank == 0:
+        assert log_lines[0] == f"study: 2 cases on {comm.size} group(s) of 1 rank(s); 2 complete already"
     assert [(c.outdir / "summary.json").stat().st_mtime_ns for c in cases] == stamps  # skipped
     assert _g(rows2) == _g(rows)
     with open(out / "study.csv") as f:

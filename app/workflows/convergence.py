@@ -24,10 +24,11 @@ from __future__ import annotations
 import csv
 import json
 import math
+import time
 from pathlib import Path
 
 from app import config, interrupt, logging_setup
-from app.workflows import reruns
+from app.workflows import progress, reruns
 from app.workflows.run import simulate
 from app.workflows.variants import variant
 
@@ -116,22 +117,22 @@ def check(cfg: dict, levels: int, studies, coarsen: bool) -> None:
 
 def _level(c: dict, d: Path, comm, label: str, force: bool, log) -> dict:
     """One level's summary: kept from an earlier converge (finished, the same config), resumed from its
-    checkpoint, or run."""
+    checkpoint, or run; and whether it was kept."""
     from app.io.checkpoint import CheckpointError
 
     if not force:
         done = comm.bcast(reruns.finished(c, d) if comm.rank == 0 else None, root=0)
         if done is not None:
             log.info(f"converge: {label}: finished by an earlier converge, kept")
-            return done
+            return done, True
         resume = reruns.resumable(c, d, comm, log, f"converge: {label}")
         if resume is not None:
             log.info(f"converge: {label}: resuming at step {resume.meta['step']}")
             try:
-                return simulate(c, d, comm, resume=resume)
+                return simulate(c, d, comm, resume=resume), False
             except CheckpointError as err:  # the checkpoint does not fit the rebuilt mesh: start anew
                 log.info(f"converge: {label}: {err}; running from the start")
-    return simulate(c, d, comm)
+    return simulate(c, d, comm), False
 
 
 def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"), time_factor: float = TIME_FACTOR,
@@ -150,6 +151,18 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
 
     writes.on_rank0(comm, outdir, clear)
     rows = []
+    # the levels this converge runs (level 0 once) and what each costs against the base: steps double per
+    # time level, cells grow by mesh_factor^2 per mesh level (the estimate of the time left scales with it)
+    units = [(s, int(lab[len(s):])) for s in studies for lab, _, _ in plans[s]]
+    units = [u for i, u in enumerate(units) if u[1] != 0 or all(v[1] != 0 for v in units[:i])]
+
+    def weight(unit):
+        per_level = 2.0 if unit[0] == "time" else mesh_factor ** 2
+        return per_level ** (-unit[1] if coarsen else unit[1])
+
+    ran: list = []
+    bar = progress.Cases("converge", len(units), 1, lambda: len(ran), log, comm.rank == 0, unit="levels")
+    rows = []
     report: dict = {"status": "complete", "base": {}, "studies": {}, "direction": "coarsen" if coarsen else "refine"}
     base_summary = None
     stopped = False
@@ -166,7 +179,11 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
                 break
             else:
                 log.info(f"converge: {label} ({'tolerance' if study == 'time' else 'element_size'} = {value:g})")
-                s = _level(c, outdir / ("base" if level == 0 else label), comm, label, force, log)
+                t0 = time.perf_counter()
+                s, kept = _level(c, outdir / ("base" if level == 0 else label), comm, label, force, log)
+                ran.append((study, level))
+                bar.finished(None if kept else time.perf_counter() - t0, weight((study, level)),
+                             sum(weight(u) for u in units if u not in ran))
                 if level == 0:
                     base_summary = s
             crit = s.get("critical", {})

@@ -28,7 +28,9 @@ def after_run_steps(cfg: dict, outdir, comm) -> list:
     return steps
 
 
-def run_case(cfg: dict, outdir, comm, progress: bool = True, resume=None) -> dict:
+def run_case(cfg: dict, outdir, comm, progress: bool = True, resume=None, monitor=None) -> dict:
     """Simulate ``cfg`` into ``outdir`` with its pipeline steps; return the summary (``resume``: the
-    directory's checked checkpoint to continue from, :func:`app.io.checkpoint.check`)."""
-    return simulate(cfg, outdir, comm, progress=progress, after=after_run_steps(cfg, outdir, comm), resume=resume)
+    directory's checked checkpoint to continue from, :func:`app.io.checkpoint.check`; ``monitor``: told
+    every accepted step of the run itself)."""
+    return simulate(cfg, outdir, comm, progress=progress, after=after_run_steps(cfg, outdir, comm), resume=resume,
+                    monitor=monitor)

@@ -61,7 +61,7 @@ def progress_line(rec: StepRecord) -> str:
 
 
 def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: bool = True, after=(),
-             resume: checkpoint.Resume | None = None, stop_after: int | None = None) -> dict:
+             resume: checkpoint.Resume | None = None, stop_after: int | None = None, monitor=None) -> dict:
     """Run the transient problem of ``cfg``; write results to ``outdir``; return the summary.
 
     ``after``: callables that amend the summary once the run has ended and its solvers are freed,
@@ -69,7 +69,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     ``resume``: ``outdir``'s checked checkpoint (:func:`app.io.checkpoint.check`) to continue from; the
     directory is not touched before its state is in place (a :class:`~app.io.checkpoint.CheckpointError`
     before that leaves it as it was). ``stop_after``: stop as an interrupt would (checkpoint, status
-    "interrupted") once this many steps are accepted (tests).
+    "interrupted") once this many steps are accepted (tests). ``monitor``: told every accepted step's
+    record (a study's progress bar, :mod:`app.workflows.progress`).
 
     A result file that cannot be written (a full disk) stops the run after the current step, as a solver
     failure does (status "failed", the checkpoint of that step if it can be written, everything else
@@ -79,6 +80,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     settings = RunSettings.from_config(cfg)
     with interrupt.Watch(comm) as watch:  # SIGINT/SIGTERM: recorded, acted on between steps
         loop = RunLoop.build(cfg, outdir, comm, settings, problem, resume, progress, watch)
+        loop.monitor = monitor
         status, message = loop.run(stop_after)
     problem, stepper, tracker, writer = loop.problem, loop.stepper, loop.tracker, loop.writer
     summary = summarize(status if status == "interrupted" else tracker.status(status), message, writer.rows[-1],
@@ -130,6 +132,7 @@ class RunLoop:
         self.problem, self.stepper, self.tracker, self.writer = problem, stepper, tracker, writer
         self.checkpoints, self.watch, self.settings, self.profiles = checkpoints, watch, settings, profiles
         self.log, self.detail = logging_setup.get(), detail
+        self.monitor = None  # told every accepted step after the progress line (a study's progress)
 
     @classmethod
     def build(cls, cfg: dict, outdir, comm, settings: RunSettings, problem, resume, progress: bool, watch) -> RunLoop:
@@ -221,6 +224,8 @@ class RunLoop:
         self.tracker.test(rec)
         self.writer.history_row(row_of(rec))
         self.detail(progress_line(rec))
+        if self.monitor is not None:
+            self.monitor(rec)
 
     def _end_after(self, rec) -> tuple[str, str] | None:
         """The crossings located and the policy asked; on a branch the surface profile kept; equilibrium."""

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from app import config, interrupt, logging_setup
+from app.workflows import progress
 from app.workflows.reruns import COMPLETE, finished, resumable  # noqa: F401 - COMPLETE: read by the CLI
 from app.workflows.variants import variant
 
@@ -152,6 +153,13 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
     sub = comm.Split(color, comm.rank)
     watch = interrupt.Watch(sub).__enter__()  # a signal between cases is recorded too
     write_error = None
+    # shown by world rank 0 only (the one rank that logs): its group's cases time the estimate
+    bar = progress.Cases("study", len(cases), n_groups, lambda: sum(is_complete(c, solver) for c in cases), log,
+                         comm.rank == 0)
+    if comm.rank == 0:
+        done = bar.done()
+        log.info(f"study: {len(cases)} cases on {n_groups} group(s) of {k} rank(s)"
+                 + (f"; {done} complete already" if done and not force else ""))
     try:
         for i, case in enumerate(cases):
             if color >= n_groups or i % n_groups != color:
@@ -168,6 +176,7 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
                 t0 = time.perf_counter()
                 _run_reduced(case, log)
                 log.info(f"study: {case.label}: 1D reduction done in {time.perf_counter() - t0:.1f} s")
+                bar.finished(time.perf_counter() - t0)
                 continue
             resume = None if force else _checkpoint(case, sub, log)
             if sub.rank == 0:
@@ -175,12 +184,13 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
                 log.info(f"study: {case.label}: {how} on {sub.size} rank(s)")
             t0 = time.perf_counter()
             try:
-                try:
-                    run_case(case.cfg, case.outdir, sub, progress=False, resume=resume)
-                except CheckpointError as err:  # the checkpoint does not fit the rebuilt mesh: start anew
-                    if sub.rank == 0:
-                        log.info(f"study: {case.label}: {err}; running from the start")
-                    run_case(case.cfg, case.outdir, sub, progress=False)
+                with bar.case(case.label, case.cfg["time"]["end"]) as monitor:
+                    try:
+                        run_case(case.cfg, case.outdir, sub, progress=False, resume=resume, monitor=monitor)
+                    except CheckpointError as err:  # the checkpoint does not fit the rebuilt mesh: start anew
+                        if sub.rank == 0:
+                            log.info(f"study: {case.label}: {err}; running from the start")
+                        run_case(case.cfg, case.outdir, sub, progress=False, monitor=monitor)
             except ResultWriteError as err:  # agreed in the group: no further case can be written either
                 write_error = (err.path, err.reason)
                 if sub.rank == 0:
@@ -196,6 +206,7 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
                         pass
             if sub.rank == 0:
                 log.info(f"study: {case.label}: done in {time.perf_counter() - t0:.1f} s")
+            bar.finished(time.perf_counter() - t0)
     finally:
         try:  # still watching: a rank whose group is done (or an idle rank) is stopped by a signal, not killed
             errors = comm.allgather(write_error)  # also the barrier that keeps the groups in step
