@@ -3,6 +3,8 @@
 # Any failure, including "no tests collected" (pytest exit code 5), fails the script.
 # Extra arguments go to pytest (e.g. `scripts/test.sh -k config`).
 #   HYDROBUCKLE_TEST_PARTS=serial|mpi   only that half (.ci/run runs the halves of two stacks in turn)
+#   HYDROBUCKLE_TEST_SHARE=k/n          of the long tests (tests/data/long-tests.txt) only share k of n;
+#                                       every other test (.ci/run: Debian 12 1/2, Debian 13 2/2)
 set -euo pipefail
 parts="${HYDROBUCKLE_TEST_PARTS:-serial mpi}"
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

@@ -33,6 +33,92 @@ child_jobs = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="starts its own 
                                 "ranks): the serial session starts the same ones")
 
 
+# --- the long tests shared between the two stacks' CI halves ------------------------------------------
+#: "SECONDS NODEID" per line: the suite's longest tests, as measured serially (docs/testing.md)
+LONG_TESTS = Path(__file__).parent / "data" / "long-tests.txt"
+
+
+def listed_seconds(path: Path = LONG_TESTS) -> dict[str, float]:
+    seconds = {}
+    for line in path.read_text().splitlines():
+        if line.strip() and not line.startswith("#"):
+            value, nodeid = line.split(maxsplit=1)
+            seconds[nodeid.strip()] = float(value)
+    return seconds
+
+
+def _module_fixtures(item) -> set:
+    """The module-scoped fixtures an item uses: tests that share one share its cost, so they stay together."""
+    info = getattr(item, "_fixtureinfo", None)
+    defs = info.name2fixturedefs.items() if info is not None else ()
+    return {(item.module.__name__, name) for name, fds in defs if fds and fds[-1].scope == "module"}
+
+
+def long_test_shares(items, n: int, seconds: dict[str, float]) -> dict[str, int]:
+    """Each collected item's share (1..n), for the items that cost time: listed in ``seconds``, or joined
+    to a listed item by a module-scoped fixture (its setup is paid once per share that runs one of them).
+    Units (such joined items) go longest first to the share with the least time so far (ties: the lowest
+    share), so that the shares take about the same time. Items not in the result run in every share."""
+    unit = {item.nodeid: item.nodeid for item in items}
+
+    def root(x):
+        while unit[x] != x:
+            unit[x] = unit[unit[x]]
+            x = unit[x]
+        return x
+
+    by_fixture: dict = {}
+    for item in items:
+        for key in _module_fixtures(item):
+            by_fixture.setdefault(key, []).append(item.nodeid)
+    for members in by_fixture.values():
+        for other in members[1:]:
+            unit[root(other)] = root(members[0])
+    cost: dict[str, float] = {}
+    for item in items:
+        cost[root(item.nodeid)] = cost.get(root(item.nodeid), 0.0) + seconds.get(item.nodeid, 0.0)
+    load, share_of_unit = [0.0] * n, {}
+    for u in sorted((u for u in cost if cost[u] > 0), key=lambda u: (-cost[u], u)):
+        k = min(range(n), key=lambda i: (load[i], i))
+        load[k] += cost[u]
+        share_of_unit[u] = k + 1
+    return {item.nodeid: share_of_unit[root(item.nodeid)] for item in items if root(item.nodeid) in share_of_unit}
+
+
+def _share() -> tuple[int, int] | None:
+    """HYDROBUCKLE_TEST_SHARE=k/n: this session runs share k of n of the long tests (unset: all of them)."""
+    text = os.environ.get("HYDROBUCKLE_TEST_SHARE", "").strip()
+    if not text:
+        return None
+    try:
+        k, n = (int(v) for v in text.split("/"))
+    except ValueError:
+        k = n = 0
+    if not 1 <= k <= n:
+        raise pytest.UsageError(f"HYDROBUCKLE_TEST_SHARE must be k/n with 1 <= k <= n (got {text!r})")
+    return k, n
+
+
+def pytest_collection_modifyitems(config, items):
+    """With HYDROBUCKLE_TEST_SHARE=k/n (.ci/run: Debian 12 1/2, Debian 13 2/2, in both the serial and the
+    2-rank session), each test of tests/data/long-tests.txt (with the tests that share its module
+    fixtures) runs in one share only; every other test runs in every share. The same on every rank."""
+    share = _share()
+    if share is None:
+        return
+    k, n = share
+    shares = long_test_shares(items, n, listed_seconds())
+    keep = [item for item in items if shares.get(item.nodeid, k) == k]
+    dropped = [item for item in items if shares.get(item.nodeid, k) != k]
+    if dropped:
+        config.hook.pytest_deselected(items=dropped)
+    items[:] = keep
+    if MPI.COMM_WORLD.rank == 0:
+        mine = sum(v == k for v in shares.values())
+        print(f"\nhydrobuckle: share {k}/{n}: {mine} of the {len(shares)} long tests "
+              f"({LONG_TESTS.name} and the tests sharing their module fixtures); every other test", flush=True)
+
+
 @pytest.fixture(autouse=True)
 def _collective_cleanup():
     """Keep collective destructors of PETSc/dolfinx objects in step across ranks."""

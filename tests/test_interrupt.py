@@ -57,7 +57,7 @@ def _check_results(out, sig_name, ranks, rows=5):
     assert summary["status"] == "interrupted"
     assert summary["ranks"] == ranks
     assert f"interrupted by {sig_name}" in summary["message"]
-    assert len(table) > rows
+    assert len(table) >= rows  # every row written before the signal (it may come just after one: no more)
     # the summary's final state is the last history row, named in the message
     assert summary["steps"] == int(table[-1]["step"])
     assert summary["final"]["time"] == float(table[-1]["time"])
