@@ -46,8 +46,8 @@ class Cases:
 
     def __init__(self, what: str, total: int, groups: int, done, log, show: bool, bar: bool | None = None,
                  unit: str = "cases"):
-        self.what, self.total, self.groups, self.done, self.log, self.show = what, total, max(1, groups), done, log, show
-        self.unit = unit
+        self.what, self.total, self.groups, self.done = what, total, max(1, groups), done
+        self.log, self.show, self.unit = log, show, unit
         self.bar = on_terminal() if bar is None else bar
         self.runs: list[tuple[float, float]] = []  # (wall time, weight) of each case run here
 
