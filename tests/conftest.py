@@ -145,7 +145,9 @@ def _quiet_logging():
     logging_setup.setup(MPI.COMM_WORLD, logging.WARNING)
 
 
-class _Lines(logging.Handler):
+class LogLines(logging.Handler):
+    """A log handler that keeps each message."""
+
     def __init__(self):
         super().__init__()
         self.lines = []
@@ -158,7 +160,7 @@ class _Lines(logging.Handler):
 def log_lines(monkeypatch):
     """The INFO lines hydrobuckle's log shows during a test (rank 0; the other ranks log nothing), also
     of a command that sets its logging up again (``cli.main``, with -q or not)."""
-    handler = _Lines()
+    handler = LogLines()
 
     def attach():
         log = logging_setup.get()

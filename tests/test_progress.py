@@ -5,21 +5,14 @@ import io
 import logging
 from types import SimpleNamespace
 
+from conftest import LogLines
+
 from app.workflows import progress
-
-
-class Lines(logging.Handler):
-    def __init__(self):
-        super().__init__()
-        self.lines = []
-
-    def emit(self, record):
-        self.lines.append(record.getMessage())
 
 
 def _log():
     log = logging.getLogger("hydrobuckle.test_progress")
-    log.handlers, log.propagate = [Lines()], False
+    log.handlers, log.propagate = [LogLines()], False
     log.setLevel(logging.INFO)
     return log, log.handlers[0].lines
 
