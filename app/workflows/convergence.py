@@ -115,7 +115,7 @@ def check(cfg: dict, levels: int, studies, coarsen: bool) -> None:
             preflight.mesh_size(c, False, f"converge level {label}")
 
 
-def _level(c: dict, d: Path, comm, label: str, force: bool, log) -> dict:
+def _level(c: dict, d: Path, comm, label: str, force: bool, log) -> tuple[dict, bool]:
     """One level's summary: kept from an earlier converge (finished, the same config), resumed from its
     checkpoint, or run; and whether it was kept."""
     from app.io.checkpoint import CheckpointError
@@ -153,8 +153,8 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
     rows = []
     # the levels this converge runs (level 0 once) and what each costs against the base: steps double per
     # time level, cells grow by mesh_factor^2 per mesh level (the estimate of the time left scales with it)
-    units = [(s, int(lab[len(s):])) for s in studies for lab, _, _ in plans[s]]
-    units = [u for i, u in enumerate(units) if u[1] != 0 or all(v[1] != 0 for v in units[:i])]
+    levels_of = {s: [int(lab[len(s):]) for lab, _, _ in plans[s]] for s in studies}
+    units = [(studies[0], 0)] + [(s, k) for s in studies for k in levels_of[s] if k != 0]
 
     def weight(unit):
         per_level = 2.0 if unit[0] == "time" else mesh_factor ** 2
@@ -162,7 +162,6 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
 
     ran: list = []
     bar = progress.Cases("converge", len(units), 1, lambda: len(ran), log, comm.rank == 0, unit="levels")
-    rows = []
     report: dict = {"status": "complete", "base": {}, "studies": {}, "direction": "coarsen" if coarsen else "refine"}
     base_summary = None
     stopped = False
