@@ -56,7 +56,7 @@ class MinimizingNewton(NewtonSolver):
 
     def __init__(self, energy, residual, hessian, bcs, w, settings: SolverSettings, comm, fields=None, extra=None):
         settings = dataclasses.replace(settings, line_search="bt", max_it=ITERATION_FACTOR * settings.max_it,
-                                       factorization="cholesky", linear="direct")
+                                       factorization="cholesky", linear="direct", reuse=False)
         super().__init__(residual, hessian, bcs, w, settings, comm, fields, extra)
         self.energy_form = energy
         self.snes.setObjective(self._objective)

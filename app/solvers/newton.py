@@ -31,12 +31,14 @@ class SolverSettings:
     ksp_rtol: float = 1e-10
     ksp_max_it: int = 2000
     line_search: str = "basic"
+    reuse: bool = False  # modified Newton: keep the factor while |R| falls by reuse_rate per iteration
+    reuse_rate: float = 0.03
 
     @classmethod
     def from_config(cls, cfg: dict) -> SolverSettings:
         s = cfg["solver"]
         return cls(s["rtol"], s["atol"], s["max_it"], s["factorization"], s["linear"], s["ksp_rtol"],
-                   s["ksp_max_it"])
+                   s["ksp_max_it"], reuse=s["reuse"], reuse_rate=s["reuse_rate"])
 
 
 def allow_new_nonzeros(A: PETSc.Mat) -> None:
@@ -98,7 +100,18 @@ class NewtonSolver:
     ``extra.global_entries`` their global dofs; the same on every rank. Each rank adds the rows it owns,
     outside the Dirichlet dofs (whose rows and columns stay those of the conditions; :func:`add_blocks`).
     Its Hessian couples surface dofs that no cell couples: the matrix takes new nonzeros where contact
-    begins."""
+    begins.
+
+    **Factor reuse** (``settings.reuse``, direct solves without an extra term): each solve factorizes K at
+    its initial guess, and that factor serves the later iterations of the solve as long as each iteration
+    reduces the residual by at least ``settings.reuse_rate``; an iteration that does worse makes the next
+    one assemble and factorize K at its iterate (modified Newton with an adaptive refresh). The converged
+    state is the same to Newton's tolerance: only the path to it changes. A solve that fails after an update
+    with a kept factor is repeated from the same initial guess with a fresh factor every iteration (plain
+    Newton), so reuse never turns a step that Newton solves into a failure. A factor is never carried from
+    one solve to the next: a solve then depends only on its initial guess and the problem's state, so a run
+    resumed from a checkpoint takes the same iterations as the run never stopped (carrying it over saved
+    another 15% of the factorizations on the default bilayer; docs/performance.md)."""
 
     def __init__(self, residual, hessian, bcs, w, settings: SolverSettings, comm, fields: dict | None = None,
                  extra=None):
@@ -113,6 +126,13 @@ class NewtonSolver:
         self._bc_dofs = compat.owned_bc_dofs(bcs, w.function_space)
         self._lifting = True
         self.extra = extra
+        self.reuse = settings.reuse and settings.linear == "direct" and extra is None
+        self.reuse_rate = settings.reuse_rate
+        self._refresh = True  # the next Jacobian call assembles and factorizes K
+        self._kept = False  # the last solve took an update with a factor it did not make at that iterate
+        self._plain = False  # this solve factorizes every iteration (the repeat of a failed reuse)
+        self.factorizations = 0  # of K, by this solver
+        self.reuse_retries = 0  # solves repeated with plain Newton after a failure with a kept factor
         if extra is not None:
             allow_new_nonzeros(self.A)
             self._held = held_global(bcs, w.function_space, comm)
@@ -252,6 +272,8 @@ class NewtonSolver:
                 self.floor_accepted += 1
             elif fnorm > DIVTOL * self._rnorm0:
                 out = reason.DIVERGED_DTOL
+        if it and self.reuse and fnorm > self.reuse_rate * self._fprev:
+            self._refresh = True  # too slow for the kept factor: a fresh one at the next iteration
         self._fprev = fnorm
         return out
 
@@ -266,6 +288,18 @@ class NewtonSolver:
         return self._dx.norm()
 
     def _jacobian(self, snes, x, J, P):
+        ksp = snes.getKSP()
+        if self.reuse and not (self._refresh or self._plain):
+            ksp.getPC().setReusePreconditioner(True)  # J untouched and its factor kept (no PCSetUp)
+            self._kept = True
+            return
+        if self.reuse:
+            ksp.getPC().setReusePreconditioner(False)
+            self._refresh = False
+        self.factorizations += 1
+        self._assemble_jacobian(x, J)
+
+    def _assemble_jacobian(self, x, J):
         with timing.timed("assembly"):
             compat.assemble_matrix_into(J, self.hessian_form, self.bcs)
             if self.extra is not None:
@@ -278,13 +312,18 @@ class NewtonSolver:
         self._lifting = self._needs_lifting(self.x)
         if not self._lifting:
             compat.set_dirichlet_values(self.x, self.bcs)  # exact, not just to round-off
-        try:
-            with timing.timed("newton"):
-                self.snes.solve(None, self.x)
-            reason = self.snes.getConvergedReason()
-        except PETSc.Error:
-            reason = -100
-        its = self.snes.getIterationNumber()
+        self._kept = self._plain = False
+        self._refresh = True  # every solve starts with a factor of its own
+        start = self.x.copy() if self.reuse else None
+        reason, its = self._snes_solve()
+        if reason <= 0 and self._kept:  # the kept factor may be what failed: again, plain Newton
+            self.reuse_retries += 1
+            start.copy(self.x)
+            self._plain = True
+            reason, more = self._snes_solve()
+            its += more
+        if start is not None:
+            start.destroy()
         self.last_iterations = its
         if its >= 1 and self.extra is None:
             # every option has been read once the linear solver was set up (MUMPS reads its controls at
@@ -299,12 +338,23 @@ class NewtonSolver:
         converged = reason > 0 and np.isfinite(fnorm)
         return NewtonResult(converged, its, reason, float(fnorm))
 
+    def _snes_solve(self) -> tuple[int, int]:
+        """One SNES solve from ``self.x``: (converged reason, -100 for a PETSc error; iterations)."""
+        try:
+            with timing.timed("newton"):
+                self.snes.solve(None, self.x)
+            reason = self.snes.getConvergedReason()
+        except PETSc.Error:
+            reason = -100
+        return reason, self.snes.getIterationNumber()
+
     def factor_inertia(self) -> tuple[int, int, int] | None:
         """(negative, zero, positive) pivot counts of the last LDL^T factorization of the last solve.
 
         That factor is K at the last Newton iterate (one update short of the converged state) with
         the step's tau, Dirichlet rows and columns replaced by a unit diagonal (which adds only
-        positive eigenvalues). None if the last solve factorized nothing or used LU."""
+        positive eigenvalues). With factor reuse it may be K at an earlier iterate of that solve (its initial
+        guess at the earliest). None if the last solve factorized nothing or used LU."""
         if self.factorization != "cholesky" or self.last_iterations < 1:
             return None
         F = self.snes.getKSP().getPC().getFactorMatrix()
@@ -315,11 +365,13 @@ class NewtonSolver:
         """The state that outlives one solve (for checkpoints): the problem's residual scale (the
         roundoff-floor rule reads it) and the counters reported in the summary."""
         return {"residual_scale": self.residual_scale, "floor_accepted": self.floor_accepted,
-                "linear_iterations": self.linear_iterations}
+                "linear_iterations": self.linear_iterations, "factorizations": self.factorizations,
+                "reuse_retries": self.reuse_retries}
 
     def set_counters(self, c: dict) -> None:
         self.residual_scale, self.floor_accepted = c["residual_scale"], c["floor_accepted"]
         self.linear_iterations = c["linear_iterations"]
+        self.factorizations, self.reuse_retries = c.get("factorizations", 0), c.get("reuse_retries", 0)
 
     def destroy(self) -> None:
         self._options.clear()

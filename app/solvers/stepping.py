@@ -454,6 +454,12 @@ class TimeStepper:
         """Inertia of the last Newton factor (see :meth:`NewtonSolver.factor_inertia`)."""
         return self.solver.factor_inertia()
 
+    def factor_counts(self) -> dict:
+        """Newton's factorizations of K so far (the minimizer's shifted ones not included), and the solves
+        repeated with plain Newton after a kept factor failed (:class:`NewtonSolver`)."""
+        c = self.solver.counters()
+        return {"factorizations": c["factorizations"], "reuse_retries": c["reuse_retries"]}
+
     @property
     def linear_iterations(self) -> int:
         return self.solver.linear_iterations
