@@ -137,6 +137,12 @@ MUTATIONS = [
     ("2D surface check: the surface state not in equilibrium with the bath", "app/onset/surface.py",
      r"\(mu - self\.mu_bar\) \* v\[2\]", "(mu - 0.0) * v[2]",
      ["tests/test_surface_check.py"]),
+    ("a solve failed with a kept factor is not repeated with plain Newton", "app/solvers/newton.py",
+     r"if reason <= 0 and self\._kept:", "if False:",
+     ["tests/test_reuse.py::test_a_failed_reuse_is_repeated_with_plain_newton"]),
+    ("the repeat of a failed reuse starts from the failed iterate", "app/solvers/newton.py",
+     r"            start\.copy\(self\.x\)\n", "",
+     ["tests/test_reuse.py::test_a_failed_reuse_is_repeated_with_plain_newton"]),
 ]
 
 
