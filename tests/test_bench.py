@@ -14,7 +14,10 @@ def test_bench_writes_well_formed_json(shared_tmp):
     doc = json.loads((out / "bench.json").read_text())
     run = doc["runs"][str(MPI.COMM_WORLD.size)]["sizes"]["coarse"]
     assert run["dofs"] > 0 and run["steps"] > 0 and run["newton_iterations"] >= run["steps"]
-    assert run["factorizations"] >= run["newton_iterations"]  # one per Newton iteration at least
+    # PETSc's count of numeric factorizations in Newton's solves is the solver's own count (factor reuse)
+    assert run["factorizations"] == run["solver_factorizations"] > 0
+    assert run["R_step"] * run["t_factor_s"] * run["steps"] == pytest.approx(
+        run["wall_time_s"] - run["setup_time_s"], rel=1e-12)
     # every accepted step is tested: screened on the Newton factor or exactly (more in the bisection)
     assert run["stability_tests"] + run["screened_steps"] >= run["steps"] + 1
     assert run["R"] > 0 and run["t_factor_s"] > 0
@@ -55,3 +58,25 @@ def test_bench_counts_each_size_separately(shared_tmp):
         runs.append(json.loads((out / "bench.json").read_text())["runs"][str(MPI.COMM_WORLD.size)]["sizes"]["coarse"])
     for key in ("factorizations", "newton_iterations", "stability_tests", "steps"):
         assert runs[1][key] == runs[0][key] > 0, key
+
+
+def test_bench_baseline_runs_beside_the_current_settings(shared_tmp):
+    """--baseline: each size also with the settings before factor reuse, reported as ratios. The baseline
+    factorizes once per Newton iteration at least; the current settings factorize less, with the same g_c
+    (to Newton's tolerance) and N_c."""
+    out = shared_tmp / "bench-baseline"
+    assert cli.main(["bench", "--sizes", "coarse", "--baseline", "-o", str(out), "-q",
+                     "--set", "geometry.length=0.2"]) == 0
+    doc = json.loads((out / "bench.json").read_text())
+    k = str(MPI.COMM_WORLD.size)
+    now, base = doc["runs"][k]["sizes"]["coarse"], doc["runs"][k]["baseline"]["sizes"]["coarse"]
+    assert doc["runs"][k]["baseline"]["overrides"] == ["solver.reuse=false"]
+    assert base["factorizations"] >= base["newton_iterations"] > 0
+    assert now["factorizations"] < base["factorizations"]
+    a = doc["against_baseline"]["runs"][k]["coarse"]
+    assert a["speedup_wall"] == pytest.approx(base["wall_time_s"] / now["wall_time_s"], rel=1e-12)
+    assert (a["factorizations_baseline"], a["factorizations"]) == (base["factorizations"], now["factorizations"])
+    assert a["g_c_relative_change"] <= 1e-9 and a["N_c"] == a["N_c_baseline"]
+    text = (out / "bench.md").read_text()
+    assert "Against the baseline (solver.reuse=false)" in text and text.count("| coarse |") == 2
+    assert (out / "run-coarse-np{}-baseline".format(k) / "summary.json").is_file()

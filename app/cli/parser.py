@@ -68,6 +68,9 @@ def parser() -> argparse.ArgumentParser:
               output="directory for bench.json and the runs", default="results/bench")
     be.add_argument("--sizes", default="coarse,default,fine", help="comma-separated: coarse, default, fine, finer")
     be.add_argument("--ranks", help="comma-separated rank counts to launch under mpirun, e.g. 1,2")
+    be.add_argument("--baseline", action="store_true",
+                    help="also run each size with the settings before factor reuse (solver.reuse=false), just "
+                         "before the current ones, and print the ratios")
     be.add_argument("--json-only", help=argparse.SUPPRESS)
     conv = _add(sub, "converge", "time-step and mesh refinement study of g_c (Richardson estimate)",
                 output="study directory (default results/<config name>-converge)")

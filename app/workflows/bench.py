@@ -4,15 +4,21 @@ Per accepted step the time splits into form assembly, factorizations and triangu
 Newton iterations, from PETSc's event log), exact stability tests (K on the free dofs and its LDL^T
 inertia), eigen-solves, output and other; the setup (mesh, spaces, forms) is reported apart.
 
-R = (time of the time loop) / ((Newton iterations + accepted steps) x t_factor): the bound of one
-factorization per Newton iteration plus one per step for its stability test, with t_factor the mean
-time of one numeric factorization of the Newton K in the same run and the Newton iterations of every
-solve the run made (accepted, rejected and bisection steps). R = 1 means the run costs exactly that.
+``R_step`` = (time of the time loop) / (accepted steps x t_factor), with t_factor the mean time of one numeric
+factorization of the Newton K in the same run: the cost of a step in factorizations (1 would be one
+factorization per step and nothing else). R = (time of the time loop) / ((Newton factorizations + accepted
+steps) x t_factor): the bound of one factorization per factorization Newton made (every solve's: accepted,
+rejected and bisection steps) plus one per step for its stability test; R = 1 means the run costs exactly
+that (without factor reuse Newton factorizes once per iteration).
 ``R_performed`` divides by the factorizations actually made instead: Newton's plus every exact stability
 test (larger than R where steps are screened on the Newton factor, which factorizes nothing; smaller
 with the default drained criterion, tested exactly every step and in the bisection, although its matrix
 has only the displacement dofs and factorizes faster than K). ``R_accepted_steps`` counts only the accepted steps' Newton
 iterations in the bound (history.csv), leaving rejected and bisection solves in the time only.
+
+``--baseline`` runs every size twice in the same invocation, first with :data:`BASELINE` (the settings before
+factor reuse) and then with the current defaults, and reports the ratios of the two: speedups measured side
+by side, on the same machine minutes apart, not absolute times from different days.
 """
 
 from __future__ import annotations
@@ -30,6 +36,9 @@ from pathlib import Path
 from app import config, interrupt, logging_setup, timing
 
 SIZES = {"coarse": 2.0, "default": 1.0, "fine": 0.7, "finer": 0.5}  # element size x s, film layers / s
+#: ``--baseline``: the overrides that restore the settings before the performance work (a factorization every
+#: Newton iteration); they come after the user's --set, so a baseline run is the baseline whatever is set
+BASELINE = ["solver.reuse=false"]
 
 
 def size_config(name: str, overrides: list[str]) -> dict:
@@ -86,6 +95,8 @@ def bench_one(cfg: dict, comm, outdir: Path) -> dict | None:
             "g_c_um": crit.get("growth_um"), "N_c": crit.get("wrinkle_count"),
             "time_per_step_s": per_step, "t_factor_s": t_factor, "factorizations": n_num,
             "R": loop / (budget * t_factor) if t_factor > 0 else None,
+            "R_step": per_step / t_factor if t_factor > 0 else None,
+            "solver_factorizations": s["linear_solver"]["factorizations"],
             "R_performed": loop / (performed * t_factor) if t_factor > 0 else None,
             "R_accepted_steps": per_step / ((its_per_step + 1) * t_factor) if t_factor > 0 else None,
             "newton_factorizations": n_num, "stability_tests": n_stab,
@@ -111,25 +122,34 @@ class BenchFailed(Exception):
     """A launch of ``bench --ranks`` that failed (one line; the CLI exits 1)."""
 
 
-def run_bench(sizes: list[str], overrides: list[str], outdir: Path, comm) -> dict | None:
-    """The timings of every size, or None once SIGINT/SIGTERM stopped a run or came between two sizes
-    (no further size starts: a benchmark cannot be resumed, its runs would be timed in parts)."""
+def run_bench(sizes: list[str], overrides: list[str], outdir: Path, comm, baseline: bool = False) -> dict | None:
+    """The timings of every size (with ``baseline``, also of :data:`BASELINE`, run just before it), or None
+    once SIGINT/SIGTERM stopped a run or came between two runs (no further run starts: a benchmark cannot be
+    resumed, its runs would be timed in parts)."""
     log = logging_setup.get()
-    results = {}
+    results: dict = {"current": {}, "baseline": {}}
+    variants = (("baseline", BASELINE), ("current", [])) if baseline else (("current", []),)
     for name in sizes:
-        if interrupt.pending(comm):
-            log.info(f"bench: interrupted: size {name} and later ones not run")
-            return None
-        cfg = size_config(name, overrides)
-        log.info(f"bench: {name} mesh (element size {cfg['mesh']['element_size']:g} mm, "
-                 f"{cfg['mesh']['film_layers']} film layers) on {comm.size} rank(s)")
-        results[name] = bench_one(cfg, comm, outdir / f"run-{name}-np{comm.size}")
-        if results[name] is None:
-            return None
-    fit = _loglog_fit([(r["dofs"], r["time_per_step_s"]) for r in results.values()])
-    fit_f = _loglog_fit([(r["dofs"], r["t_factor_s"]) for r in results.values()])
-    return {"ranks": comm.size, "sizes": results, "time_per_step_vs_dofs_exponent": fit,
-            "t_factor_vs_dofs_exponent": fit_f}
+        for label, extra in variants:
+            if interrupt.pending(comm):
+                log.info(f"bench: interrupted: size {name} ({label} settings) and later ones not run")
+                return None
+            cfg = size_config(name, list(overrides) + extra)
+            log.info(f"bench: {name} mesh (element size {cfg['mesh']['element_size']:g} mm, "
+                     f"{cfg['mesh']['film_layers']} film layers) on {comm.size} rank(s), {label} settings")
+            suffix = "-baseline" if label == "baseline" else ""
+            results[label][name] = r = bench_one(cfg, comm, outdir / f"run-{name}-np{comm.size}{suffix}")
+            if r is None:
+                return None
+    out = {"ranks": comm.size, "sizes": results["current"], **_fits(results["current"])}
+    if baseline:
+        out["baseline"] = {"overrides": BASELINE, "sizes": results["baseline"], **_fits(results["baseline"])}
+    return out
+
+
+def _fits(results: dict) -> dict:
+    return {"time_per_step_vs_dofs_exponent": _loglog_fit([(r["dofs"], r["time_per_step_s"]) for r in results.values()]),
+            "t_factor_vs_dofs_exponent": _loglog_fit([(r["dofs"], r["t_factor_s"]) for r in results.values()])}
 
 
 def _loglog_fit(points) -> float | None:
@@ -143,7 +163,8 @@ def _loglog_fit(points) -> float | None:
     return sum((p[0] - mx) * (p[1] - my) for p in pts) / den if den else None
 
 
-def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdir: Path) -> dict | None:
+def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdir: Path,
+                 baseline: bool = False) -> dict | None:
     """Run the benchmark under ``mpirun -n k`` for each k (a fresh launch each) and combine; None once
     interrupted (SIGINT/SIGTERM here or in a launch); :class:`BenchFailed` if a launch fails."""
     from mpi4py import MPI
@@ -157,7 +178,7 @@ def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdi
         with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
             tmp = f.name
         cmd = ["mpirun", "-n", str(k), "--oversubscribe", sys.executable, "-m", "app", "bench", "--sizes",
-               ",".join(sizes), "-o", str(outdir), "--json-only", tmp, "-q"]
+               ",".join(sizes), "-o", str(outdir), "--json-only", tmp, "-q"] + (["--baseline"] if baseline else [])
         for o in overrides:
             cmd += ["--set", o]
         env = dict(os.environ)
@@ -186,7 +207,8 @@ def blas_library() -> str:
 
 
 def report(by_ranks: dict) -> dict:
-    """bench.json content: per rank count and size, plus 2-rank speedups."""
+    """bench.json content: per rank count and size, the speedups from 1 rank, and with a baseline the ratios
+    of each size's baseline run to its current run."""
     ranks = sorted(by_ranks)
     doc = {"blas": blas_library(), "runs": {str(k): by_ranks[k] for k in ranks}, "speedup": {}}
     if 1 in by_ranks:
@@ -196,22 +218,43 @@ def report(by_ranks: dict) -> dict:
             doc["speedup"][str(k)] = {
                 name: by_ranks[1]["sizes"][name]["wall_time_s"] / r["wall_time_s"]
                 for name, r in by_ranks[k]["sizes"].items() if name in by_ranks[1]["sizes"]}
+    against = {str(k): {name: against_baseline(run["baseline"]["sizes"][name], r)
+                        for name, r in run["sizes"].items()}
+               for k, run in by_ranks.items() if "baseline" in run}
+    if against:
+        doc["against_baseline"] = {"overrides": BASELINE, "runs": against}
     return doc
+
+
+def against_baseline(base: dict, now: dict) -> dict:
+    """One size's current run against its baseline run: speedups (baseline time / current time), both R_step,
+    the factorizations of each, and how far g_c and N_c moved."""
+    def loop(r):
+        return r["wall_time_s"] - r["setup_time_s"]
+
+    g0, g1 = base["g_c_um"], now["g_c_um"]
+    return {"speedup_wall": base["wall_time_s"] / now["wall_time_s"], "speedup_loop": loop(base) / loop(now),
+            "R_step_baseline": base["R_step"], "R_step": now["R_step"],
+            "factorizations_baseline": base["factorizations"], "factorizations": now["factorizations"],
+            "g_c_um_baseline": g0, "g_c_um": g1,
+            "g_c_relative_change": abs(g1 - g0) / abs(g0) if g0 and g1 is not None else None,
+            "N_c_baseline": base["N_c"], "N_c": now["N_c"]}
 
 
 def table(doc: dict) -> str:
     lines = [f"BLAS: {doc.get('blas', 'unknown')}", "",
-             "| ranks | size | dofs | steps | Newton it. (all) | wall [s] | setup [s] | per step [s] | t_factor [s] "
-             "| R | R_performed | assembly | factor | solves | stability | eigen | output | other | RSS/rank [MB] "
-             "| g_c [um] |",
-             "|" + "---|" * 20]
+             "| ranks | size | dofs | steps | Newton it. (factorizations) | wall [s] | setup [s] | per step [s] "
+             "| t_factor [s] | R_step | R | R_performed | assembly | factor | solves | stability | eigen | output "
+             "| other | RSS/rank [MB] | g_c [um] |",
+             "|" + "---|" * 21]
     for k, run in doc["runs"].items():
         for name, r in run["sizes"].items():
             sp = r["per_step_split_s"]
             lines.append(
                 f"| {k} | {name} | {r['dofs']} | {r['steps']} | {r['newton_iterations']} ({r['factorizations']}) | "
                 f"{r['wall_time_s']:.1f} | {r['setup_time_s']:.1f} | {r['time_per_step_s']:.3f} | "
-                f"{r['t_factor_s']:.4f} | {_f(r['R'])} | {_f(r['R_performed'])} | {sp['assembly']:.3f} | "
+                f"{r['t_factor_s']:.4f} | {_f(r['R_step'])} | {_f(r['R'])} | {_f(r['R_performed'])} | "
+                f"{sp['assembly']:.3f} | "
                 f"{sp['factorization']:.3f} | {sp['triangular_solves']:.3f} | {sp['stability_test']:.3f} | "
                 f"{sp['eigen_solve']:.3f} | {sp['output']:.3f} | {sp['other'] + sp['newton_other']:.3f} | "
                 f"{max(r['peak_rss_mb_per_rank']):.0f} | {_f(r['g_c_um'])} |")
@@ -220,7 +263,38 @@ def table(doc: dict) -> str:
                      f"t_factor ~ dofs^{_f(run['t_factor_vs_dofs_exponent'])}")
     for k, sp in doc["speedup"].items():
         lines.append(f"speedup 1 -> {k} ranks: " + ", ".join(f"{n} {v:.2f}" for n, v in sp.items()))
+    if "against_baseline" in doc:
+        lines += ["", "Against the baseline (" + ", ".join(doc["against_baseline"]["overrides"])
+                  + "), run just before each current run:", "",
+                  "| ranks | size | wall baseline [s] | wall [s] | speedup (wall) | speedup (time loop) | R_step baseline "
+                  "| R_step | factorizations baseline | factorizations | g_c baseline [um] | g_c [um] | g_c change "
+                  "| N_c baseline | N_c |", "|" + "---|" * 15]
+        for k, run in doc["against_baseline"]["runs"].items():
+            for name, a in run.items():
+                base = doc["runs"][k]["baseline"]["sizes"][name]
+                now = doc["runs"][k]["sizes"][name]
+                lines.append(f"| {k} | {name} | {base['wall_time_s']:.1f} | {now['wall_time_s']:.1f} | "
+                             f"{a['speedup_wall']:.2f} | {a['speedup_loop']:.2f} | {_f(a['R_step_baseline'])} | "
+                             f"{_f(a['R_step'])} | {a['factorizations_baseline']} | {a['factorizations']} | "
+                             f"{_f(a['g_c_um_baseline'])} | {_f(a['g_c_um'])} | {_e(a['g_c_relative_change'])} | "
+                             f"{_f(a['N_c_baseline'])} | {_f(a['N_c'])} |")
+        base_speedups = _rank_speedups({k: r["baseline"] for k, r in doc["runs"].items() if "baseline" in r})
+        for k, sp in base_speedups.items():
+            lines.append(f"baseline speedup 1 -> {k} ranks: " + ", ".join(f"{n} {v:.2f}" for n, v in sp.items()))
     return "\n".join(lines)
+
+
+def _rank_speedups(runs: dict) -> dict:
+    """{k: {size: wall on 1 rank / wall on k ranks}} of ``runs`` ({rank count (str): {"sizes": ...}})."""
+    one = runs.get("1")
+    if one is None:
+        return {}
+    return {k: {n: one["sizes"][n]["wall_time_s"] / r["wall_time_s"] for n, r in run["sizes"].items()
+                if n in one["sizes"]} for k, run in runs.items() if k != "1"}
+
+
+def _e(v):
+    return "-" if v is None else f"{v:.1e}"
 
 
 def _f(v):
@@ -267,7 +341,7 @@ def check(sizes: list[str], overrides: list[str], outdir, comm) -> None:
 
 
 def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], outdir: Path, comm,
-            json_only: str | None = None) -> str | None:
+            json_only: str | None = None, baseline: bool = False) -> str | None:
     """``hydrobuckle bench``: run (or launch per rank count) every size and write bench.json and bench.md;
     returns the table (rank 0; '' elsewhere and for a ``--json-only`` launch), or None when interrupted (no
     bench.json: timings of a part of a run are no benchmark). A stale bench.json/bench.md goes first: a
@@ -282,10 +356,10 @@ def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], out
         if not json_only:
             writes.on_rank0(comm, outdir, clear)
         if ranks:
-            by_ranks = launch_ranks(ranks, sizes, overrides, outdir)
+            by_ranks = launch_ranks(ranks, sizes, overrides, outdir, baseline)
             doc = None if by_ranks is None else report(by_ranks)
         else:
-            result = run_bench(sizes, overrides, outdir, comm)
+            result = run_bench(sizes, overrides, outdir, comm, baseline)
             if result is not None and json_only:  # a launch of `bench --ranks`: for the launching process
                 path = Path(json_only)
                 writes.on_rank0(comm, path, writes.write_text, path, json.dumps(result))
