@@ -72,6 +72,7 @@ def parser() -> argparse.ArgumentParser:
                     help="also run each size with the settings before factor reuse (solver.reuse=false), just "
                          "before the current ones, and print the ratios")
     be.add_argument("--json-only", help=argparse.SUPPRESS)
+    be.add_argument("--only", choices=["baseline", "current"], help=argparse.SUPPRESS)  # a launch of --baseline
     conv = _add(sub, "converge", "time-step and mesh refinement study of g_c (Richardson estimate)",
                 output="study directory (default results/<config name>-converge)")
     conv.add_argument("--levels", type=int, default=3, help="refinement levels per study (2..6, default 3)")

@@ -18,7 +18,10 @@ iterations in the bound (history.csv), leaving rejected and bisection solves in 
 
 ``--baseline`` runs every size twice in the same invocation, first with :data:`BASELINE` (the settings before
 factor reuse) and then with the current defaults, and reports the ratios of the two: speedups measured side
-by side, on the same machine minutes apart, not absolute times from different days.
+by side, on the same machine minutes apart, not absolute times from different days. With ``--ranks`` the
+two variants are separate launches (each its own processes, so each peak memory is its own); in one
+process the peak is reset before every run (Linux), but memory the allocator kept from an earlier run may
+still count.
 """
 
 from __future__ import annotations
@@ -56,6 +59,7 @@ def bench_one(cfg: dict, comm, outdir: Path) -> dict | None:
     from app.workflows.run import simulate
 
     timing.reset()
+    per_run = reset_peak_memory()
     t0 = time.perf_counter()
     s = simulate(cfg, outdir, comm, progress=False)
     wall = time.perf_counter() - t0
@@ -88,7 +92,7 @@ def bench_one(cfg: dict, comm, outdir: Path) -> dict | None:
     budget = n_num + steps
     performed = n_num + n_stab  # factorizations actually made (screened steps factorize nothing extra)
     crit = s.get("critical") or {}
-    rss = comm.gather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, root=0)
+    rss = comm.gather(peak_memory_mb(per_run), root=0)
     return {"ranks": comm.size, "dofs": s["mesh"]["dofs"], "cells": s["mesh"]["cells"], "steps": s["steps"],
             "newton_iterations": its, "newton_per_step": its_per_step, "wall_time_s": wall,
             "setup_time_s": tt["setup"], "time_to_gc_s": wall,
@@ -103,7 +107,32 @@ def bench_one(cfg: dict, comm, outdir: Path) -> dict | None:
             "screening": cfg["stability"]["screening"],
             "screened_steps": (s.get("stability_tests") or {}).get("screened_steps", 0),
             "per_step_split_s": {k: v / steps for k, v in split.items()},
-            "peak_rss_mb_per_rank": rss}
+            "peak_rss_mb_per_rank": rss, "peak_rss_of_this_run": per_run}
+
+
+def reset_peak_memory() -> bool:
+    """Reset this process's peak resident set size (Linux: "5" to /proc/self/clear_refs), so that the next
+    :func:`peak_memory_mb` is the peak of what runs in between, not of the process's earlier runs (the other
+    sizes and the baseline of one bench). False where it cannot be reset."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def peak_memory_mb(since_reset: bool) -> float:
+    """Peak resident set size [MB]: since :func:`reset_peak_memory` (VmHWM) if it succeeded, else of the whole
+    process (getrusage)."""
+    if since_reset:
+        try:
+            for line in Path("/proc/self/status").read_text().splitlines():
+                if line.startswith("VmHWM:"):
+                    return float(line.split()[1]) / 1024.0
+        except OSError:
+            pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _newton_iterations(outdir: Path) -> int:
@@ -122,13 +151,15 @@ class BenchFailed(Exception):
     """A launch of ``bench --ranks`` that failed (one line; the CLI exits 1)."""
 
 
-def run_bench(sizes: list[str], overrides: list[str], outdir: Path, comm, baseline: bool = False) -> dict | None:
-    """The timings of every size (with ``baseline``, also of :data:`BASELINE`, run just before it), or None
-    once SIGINT/SIGTERM stopped a run or came between two runs (no further run starts: a benchmark cannot be
-    resumed, its runs would be timed in parts)."""
+def run_bench(sizes: list[str], overrides: list[str], outdir: Path, comm, baseline: bool = False,
+              only: str | None = None) -> dict | None:
+    """The timings of every size (with ``baseline``, also of :data:`BASELINE`, run just before it; ``only``:
+    just one of the two, "baseline" or "current"), or None once SIGINT/SIGTERM stopped a run or came between
+    two runs (no further run starts: a benchmark cannot be resumed, its runs would be timed in parts)."""
     log = logging_setup.get()
     results: dict = {"current": {}, "baseline": {}}
     variants = (("baseline", BASELINE), ("current", [])) if baseline else (("current", []),)
+    variants = tuple(v for v in variants if only in (None, v[0]))
     for name in sizes:
         for label, extra in variants:
             if interrupt.pending(comm):
@@ -166,36 +197,52 @@ def _loglog_fit(points) -> float | None:
 def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdir: Path,
                  baseline: bool = False) -> dict | None:
     """Run the benchmark under ``mpirun -n k`` for each k (a fresh launch each) and combine; None once
-    interrupted (SIGINT/SIGTERM here or in a launch); :class:`BenchFailed` if a launch fails."""
+    interrupted (SIGINT/SIGTERM here or in a launch); :class:`BenchFailed` if a launch fails. With
+    ``baseline``, the baseline and the current settings are two launches per k, one after the other."""
+    out = {}
+    for k in ranks:
+        if baseline:  # each variant in its own processes: its peak memory is its own
+            parts = {}
+            for only in ("baseline", "current"):
+                parts[only] = _launch(k, sizes, overrides, outdir, ["--baseline", "--only", only])
+                if parts[only] is None:
+                    return None
+            out[k] = {**parts["current"], "baseline": parts["baseline"]["baseline"]}
+        else:
+            out[k] = _launch(k, sizes, overrides, outdir, [])
+            if out[k] is None:
+                return None
+    return out
+
+
+def _launch(k: int, sizes: list[str], overrides: list[str], outdir: Path, extra: list[str]) -> dict | None:
+    """One ``mpirun -n k ... bench --json-only``: its result, None once interrupted; BenchFailed if it failed."""
     from mpi4py import MPI
 
     from app.io import lock
 
-    out = {}
-    for k in ranks:
-        if interrupt.pending(MPI.COMM_SELF):
-            return None
-        with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
-            tmp = f.name
-        cmd = ["mpirun", "-n", str(k), "--oversubscribe", sys.executable, "-m", "app", "bench", "--sizes",
-               ",".join(sizes), "-o", str(outdir), "--json-only", tmp, "-q"] + (["--baseline"] if baseline else [])
-        for o in overrides:
-            cmd += ["--set", o]
-        env = dict(os.environ)
-        if os.getuid() == 0:
-            env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-        env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-        env[lock.INHERITED] = lock.held_env()  # the launch writes into this bench's directory
-        code = subprocess.run(cmd, env=env).returncode
-        try:
-            if interrupt.pending(MPI.COMM_SELF) or code in interrupt.EXIT_CODES.values():
-                return None  # a Ctrl-C reaches this process too (mpirun itself then exits 1)
-            if code != 0:
-                raise BenchFailed(f"bench: `mpirun -n {k} ... bench --json-only` exited with code {code}")
-            out[k] = json.loads(Path(tmp).read_text())
-        finally:
-            os.unlink(tmp)
-    return out
+    if interrupt.pending(MPI.COMM_SELF):
+        return None
+    with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
+        tmp = f.name
+    cmd = ["mpirun", "-n", str(k), "--oversubscribe", sys.executable, "-m", "app", "bench", "--sizes",
+           ",".join(sizes), "-o", str(outdir), "--json-only", tmp, "-q"] + extra
+    for o in overrides:
+        cmd += ["--set", o]
+    env = dict(os.environ)
+    if os.getuid() == 0:
+        env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    env[lock.INHERITED] = lock.held_env()  # the launch writes into this bench's directory
+    code = subprocess.run(cmd, env=env).returncode
+    try:
+        if interrupt.pending(MPI.COMM_SELF) or code in interrupt.EXIT_CODES.values():
+            return None  # a Ctrl-C reaches this process too (mpirun itself then exits 1)
+        if code != 0:
+            raise BenchFailed(f"bench: `mpirun -n {k} ... bench --json-only` exited with code {code}")
+        return json.loads(Path(tmp).read_text())
+    finally:
+        os.unlink(tmp)
 
 
 def blas_library() -> str:
@@ -341,7 +388,7 @@ def check(sizes: list[str], overrides: list[str], outdir, comm) -> None:
 
 
 def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], outdir: Path, comm,
-            json_only: str | None = None, baseline: bool = False) -> str | None:
+            json_only: str | None = None, baseline: bool = False, only: str | None = None) -> str | None:
     """``hydrobuckle bench``: run (or launch per rank count) every size and write bench.json and bench.md;
     returns the table (rank 0; '' elsewhere and for a ``--json-only`` launch), or None when interrupted (no
     bench.json: timings of a part of a run are no benchmark). A stale bench.json/bench.md goes first: a
@@ -359,7 +406,7 @@ def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], out
             by_ranks = launch_ranks(ranks, sizes, overrides, outdir, baseline)
             doc = None if by_ranks is None else report(by_ranks)
         else:
-            result = run_bench(sizes, overrides, outdir, comm, baseline)
+            result = run_bench(sizes, overrides, outdir, comm, baseline, only)
             if result is not None and json_only:  # a launch of `bench --ranks`: for the launching process
                 path = Path(json_only)
                 writes.on_rank0(comm, path, writes.write_text, path, json.dumps(result))
