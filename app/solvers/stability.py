@@ -139,15 +139,9 @@ class DrainedOperator:
         d = sub["cc"].getDiagonal()
         self._negative_c = int(self.comm.allreduce(int(np.count_nonzero(d.array <= 0.0))))
         d.reciprocal()
-        # K_uc K_cc^-1 (K_cc is diagonal: one content dof per cell) and its product with K_cu; both kept, so
-        # that later tests reuse the product's symbolic phase (the patterns do not change between them)
-        if "B" in sub:
-            B = sub["B"]
-            sub["uc"].copy(B, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        else:
-            B = sub["B"] = sub["uc"].copy()
-        B.diagonalScale(R=d)
-        P = sub["P"] = B.matTransposeMult(sub["uc"], result=sub.get("P"))
+        B = sub["uc"].copy()
+        B.diagonalScale(R=d)  # K_uc K_cc^-1 (K_cc is diagonal: one content dof per cell)
+        P = B.matTransposeMult(sub["uc"])
         SUBSET = PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN
         if self.S is None:  # the pattern of the union, kept: later factorizations are numeric only
             self.S = sub["uu"].copy()
@@ -157,7 +151,8 @@ class DrainedOperator:
             self.S.zeroEntries()
             self.S.axpy(1.0, sub["uu"], structure=SUBSET)
             self.S.axpy(-1.0, P, structure=SUBSET)
-        d.destroy()
+        for obj in (d, B, P):
+            obj.destroy()
         return self.S
 
     def eliminated_negatives(self) -> int:
