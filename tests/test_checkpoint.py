@@ -250,11 +250,15 @@ def test_resume_continues_like_an_uninterrupted_run(extra, stop, shared_tmp, com
 
 def _same_profiles(ref, got, tol: float) -> None:
     """Two profiles.npz files: the same steps (growth, time) and the same surface profiles, relative to the
-    largest profile value."""
+    largest profile value. The times to 1e-12 where the runs are bitwise reproducible (tol 1e-10, one
+    rank); on 2 ranks to ``tol`` like history.csv's: there the adaptive steps differ at roundoff, and their
+    sum grows with the steps (measured 1.6e-12 of t after 60 steps on Debian 13, with factor reuse before
+    the onset)."""
+    time_tol = 1e-12 if tol <= 1e-10 else tol
     with np.load(ref) as a, np.load(got) as b:
         assert set(a.files) == set(b.files) == {"growth_mm", "time", "position", "profile"}
         assert a["time"].size >= 20 and a["profile"].shape == b["profile"].shape
-        assert np.abs(a["time"] - b["time"]).max() <= 1e-12 * a["time"].max()
+        assert np.abs(a["time"] - b["time"]).max() <= time_tol * a["time"].max()
         for name in ("growth_mm", "position", "profile"):
             scale = np.abs(a[name]).max()
             assert np.abs(a[name] - b[name]).max() <= tol * scale, name
