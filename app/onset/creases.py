@@ -99,7 +99,7 @@ class CreaseTrial:
         top = p.comm.allreduce(float(self._points[:, 1].max()) if len(self._points) else -np.inf, op=_max())
         self._on_surface = np.isclose(self._points[:, 1], top, rtol=0.0, atol=1e-9 * max(1.0, abs(top)))
         # plain Newton (no factor reuse): its last quadratic iteration leaves the flat state far below the
-        # tolerance (the closed form to 3e-11 against 1e-9 with reuse), and a trial's cost is its minimizer's
+        # tolerance (the closed form to 3e-11; 1.2e-9 with reuse), and a trial's cost is its minimizer's
         self.flat_solver = NewtonSolver(sys.residual, sys.hessian, sys.bcs, sys.w,
                                         dataclasses.replace(settings, reuse=False), p.comm)
         self.crease_solver = MinimizingNewton(sys.energy, sys.residual, sys.hessian,

@@ -29,7 +29,7 @@ SOLVER: dict[str, Key] = {
     "ksp_rtol": key(float, 1.0e-10, in_open(0.0, 1.0), "relative tolerance of the iterative linear solves"),
     "ksp_max_it": key(int, 2000, ge(1), "iterations per iterative linear solve"),
     "reuse": key(bool, True, None,
-                 "keep the last LDL^T factor of K across Newton iterations and steps while the residual falls "
+                 "keep a solve's LDL^T factor of K for its later Newton iterations while the residual falls "
                  "fast enough (modified Newton; direct solves); false: a factorization every iteration"),
     "reuse_rate": key(float, 0.03, in_open(0.0, 1.0),
                       "reuse only: a fresh factor once an iteration reduced the residual by less than this factor"),

@@ -111,7 +111,7 @@ class NewtonSolver:
     Newton), so reuse never turns a step that Newton solves into a failure. A factor is never carried from
     one solve to the next: a solve then depends only on its initial guess and the problem's state, so a run
     resumed from a checkpoint takes the same iterations as the run never stopped (carrying it over saved
-    another 15% of the factorizations on the default bilayer; docs/performance.md)."""
+    another 18% of the factorizations, 8% of the run, on the default bilayer; docs/performance.md)."""
 
     def __init__(self, residual, hessian, bcs, w, settings: SolverSettings, comm, fields: dict | None = None,
                  extra=None):

@@ -107,7 +107,7 @@ def bench_one(cfg: dict, comm, outdir: Path) -> dict | None:
             "screening": cfg["stability"]["screening"],
             "screened_steps": (s.get("stability_tests") or {}).get("screened_steps", 0),
             "per_step_split_s": {k: v / steps for k, v in split.items()},
-            "peak_rss_mb_per_rank": rss, "peak_rss_of_this_run": per_run}
+            "peak_rss_mb_per_rank": rss, "peak_rss_since_reset": per_run}
 
 
 def reset_peak_memory() -> bool:
@@ -179,8 +179,9 @@ def run_bench(sizes: list[str], overrides: list[str], outdir: Path, comm, baseli
 
 
 def _fits(results: dict) -> dict:
-    return {"time_per_step_vs_dofs_exponent": _loglog_fit([(r["dofs"], r["time_per_step_s"]) for r in results.values()]),
-            "t_factor_vs_dofs_exponent": _loglog_fit([(r["dofs"], r["t_factor_s"]) for r in results.values()])}
+    runs = results.values()
+    return {"time_per_step_vs_dofs_exponent": _loglog_fit([(r["dofs"], r["time_per_step_s"]) for r in runs]),
+            "t_factor_vs_dofs_exponent": _loglog_fit([(r["dofs"], r["t_factor_s"]) for r in runs])}
 
 
 def _loglog_fit(points) -> float | None:
@@ -257,14 +258,8 @@ def report(by_ranks: dict) -> dict:
     """bench.json content: per rank count and size, the speedups from 1 rank, and with a baseline the ratios
     of each size's baseline run to its current run."""
     ranks = sorted(by_ranks)
-    doc = {"blas": blas_library(), "runs": {str(k): by_ranks[k] for k in ranks}, "speedup": {}}
-    if 1 in by_ranks:
-        for k in ranks:
-            if k == 1:
-                continue
-            doc["speedup"][str(k)] = {
-                name: by_ranks[1]["sizes"][name]["wall_time_s"] / r["wall_time_s"]
-                for name, r in by_ranks[k]["sizes"].items() if name in by_ranks[1]["sizes"]}
+    doc = {"blas": blas_library(), "runs": {str(k): by_ranks[k] for k in ranks}}
+    doc["speedup"] = _rank_speedups(doc["runs"])
     against = {str(k): {name: against_baseline(run["baseline"]["sizes"][name], r)
                         for name, r in run["sizes"].items()}
                for k, run in by_ranks.items() if "baseline" in run}
@@ -313,8 +308,8 @@ def table(doc: dict) -> str:
     if "against_baseline" in doc:
         lines += ["", "Against the baseline (" + ", ".join(doc["against_baseline"]["overrides"])
                   + "), run just before each current run:", "",
-                  "| ranks | size | wall baseline [s] | wall [s] | speedup (wall) | speedup (time loop) | R_step baseline "
-                  "| R_step | factorizations baseline | factorizations | g_c baseline [um] | g_c [um] | g_c change "
+                  "| ranks | size | wall baseline [s] | wall [s] | speedup (wall) | speedup (time loop) "
+                  "| R_step baseline | R_step | factorizations baseline | factorizations | g_c baseline [um] | g_c [um] | g_c change "
                   "| N_c baseline | N_c |", "|" + "---|" * 15]
         for k, run in doc["against_baseline"]["runs"].items():
             for name, a in run.items():
