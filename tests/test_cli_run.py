@@ -115,16 +115,16 @@ def test_run_reports_gc_with_its_discretization_error(shared_tmp):
     assert tcfg["time"]["tolerance"] == 4 * base_cfg["time"]["tolerance"]
     for bound in ("dt_initial", "dt_max"):  # the step bounds coarsened with the steps (x2)
         assert tcfg["time"][bound] == 2 * base_cfg["time"][bound]
-    assert tcfg["mesh"] == base_cfg["mesh"]
+    assert tcfg["mesh"] == mcfg["mesh"]  # the time companion runs on the mesh companion's coarse mesh
     assert mcfg["mesh"]["element_size"] == 2 * base_cfg["mesh"]["element_size"]
     assert mcfg["mesh"]["film_layers"] * 2 == base_cfg["mesh"]["film_layers"]
     assert mcfg["time"] == base_cfg["time"]
     base = json.loads((out / "summary.json").read_text())
     tsum = json.loads((out / "error-estimate" / "time" / "summary.json").read_text())
     msum = json.loads((out / "error-estimate" / "mesh" / "summary.json").read_text())
-    assert tsum["mesh"]["cells"] == base["mesh"]["cells"] and tsum["steps"] < base["steps"]
+    assert tsum["mesh"]["cells"] == msum["mesh"]["cells"] and tsum["steps"] < msum["steps"]
     assert 3.0 < base["mesh"]["cells"] / msum["mesh"]["cells"] < 5.0
-    # time: order 1 -> |g - g_2dt|; mesh: order 1.5 -> |g - g_2h| / (2^1.5 - 1)
-    assert est["time_um"] == abs(crit["growth_um"] - companions["time"])
+    # time: order 1 -> |g_2h - g_2h,2dt| (on the coarse mesh); mesh: order 1.5 -> |g - g_2h| / (2^1.5 - 1)
+    assert est["time_um"] == abs(companions["mesh"] - companions["time"])
     assert est["mesh_um"] == abs(crit["growth_um"] - companions["mesh"]) / (2 ** 1.5 - 1)
     assert est["total_um"] == est["time_um"] + est["mesh_um"] > 0

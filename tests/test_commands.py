@@ -425,15 +425,18 @@ def test_study_error_estimate_runs_coarser_companions(shared_tmp, comm):
         assert comp[study][0]["status"] == "buckled"
         assert est[f"{study}_companion_g_c_um"] == comp[study][0]["critical"]["growth_um"]
     t_cfg, m_cfg = comp["time"][1], comp["mesh"][1]
-    assert t_cfg["time"]["tolerance"] == pytest.approx(4 * cfg["time"]["tolerance"], rel=1e-14)
-    assert t_cfg["mesh"] == cfg["mesh"]
+    # the mesh companion: the run's steps on a coarser mesh; the time companion: that coarse mesh, coarser steps
     assert m_cfg["mesh"]["element_size"] == pytest.approx(2 * cfg["mesh"]["element_size"], rel=1e-14)
     assert m_cfg["mesh"]["film_layers"] * 2 == cfg["mesh"]["film_layers"]
     assert m_cfg["time"] == cfg["time"]
+    assert t_cfg["time"]["tolerance"] == pytest.approx(4 * cfg["time"]["tolerance"], rel=1e-14)
+    assert t_cfg["mesh"] == m_cfg["mesh"] and est["time_companion_mesh"] == "coarsened"
     assert comp["mesh"][0]["mesh"]["cells"] < s["mesh"]["cells"]
-    assert comp["time"][0]["steps"] < s["steps"]
+    assert comp["time"][0]["mesh"]["cells"] == comp["mesh"][0]["mesh"]["cells"]
+    assert comp["time"][0]["steps"] < comp["mesh"][0]["steps"]
     g = crit["growth_um"]
-    assert est["time_um"] == pytest.approx(abs(g - est["time_companion_g_c_um"]) / (2 ** 1 - 1), rel=1e-12)
+    assert est["time_um"] == pytest.approx(
+        abs(est["mesh_companion_g_c_um"] - est["time_companion_g_c_um"]) / (2 ** 1 - 1), rel=1e-12)
     assert est["mesh_um"] == pytest.approx(abs(g - est["mesh_companion_g_c_um"]) / (2 ** 1.5 - 1), rel=1e-12)
     assert est["total_um"] == pytest.approx(est["time_um"] + est["mesh_um"], rel=1e-12)
     assert float(row["g_c_error_um"]) == pytest.approx(est["total_um"], rel=1e-12)

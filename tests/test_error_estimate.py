@@ -62,6 +62,7 @@ def test_reported_error_covers_the_distance_to_the_converged_value(sequences):
     g = summary["critical"]["growth_um"]
     err = summary["critical"]["discretization_error"]
     assert err["mesh_companion"] == "coarsened" and err["time_companion"] == "coarsened"
+    assert err["time_companion_mesh"] == "coarsened"
     d_mesh, d_time = abs(g - _limit(mesh)), abs(g - _limit(time))
     assert all(abs(a - b) > abs(b - c) for a, b, c in zip(mesh, mesh[1:], mesh[2:])), mesh  # converging
     assert all(abs(a - b) > abs(b - c) for a, b, c in zip(time, time[1:], time[2:])), time

@@ -66,6 +66,8 @@ def test_readme_own_geometry_example_as_written(tmp_path, comm):
     assert err["time_um"] > 0 and err["mesh_um"] > 0
     assert err["total_um"] == pytest.approx(err["time_um"] + err["mesh_um"], rel=1e-12)
     assert err["time_companion"] == "coarsened" and err["mesh_companion"] == "refined"
+    assert err["time_companion_mesh"] == "the run's"  # no coarse mesh: the time companion on the run's
+    assert read_json(out / "error-estimate" / "time" / "summary.json")["mesh"]["cells"] == s["mesh"]["cells"]
     fine = read_json(out / "error-estimate" / "mesh" / "summary.json")
     assert fine["config"]["mesh"]["refinements"] == 1
     assert fine["mesh"]["cells"] == 4 * s["mesh"]["cells"]

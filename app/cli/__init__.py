@@ -158,7 +158,8 @@ def cmd_bench(args) -> int:
     sizes, ranks = bench.parse_sizes(args.sizes), bench.parse_ranks(args.ranks, comm)
     bench.check(sizes, args.set, args.output, comm)  # the directory named as the user wrote it
     _start(comm, args)
-    text = bench.command(sizes, ranks, args.set, Path(args.output), comm, args.json_only, args.baseline, args.only)
+    text = bench.command(sizes, ranks, args.set, Path(args.output), comm, args.json_only, args.baseline, args.only,
+                         args.error_estimate)
     if text:
         _say(comm, text)
     return EXIT_OK

@@ -71,6 +71,10 @@ def parser() -> argparse.ArgumentParser:
     be.add_argument("--baseline", action="store_true",
                     help="also run each size with the settings before factor reuse (solver.reuse=false), just "
                          "before the current ones, and print the ratios")
+    be.add_argument("--error-estimate", action="store_true",
+                    help="also time each size's error estimate (its companion runs) against the run; with "
+                         "--baseline the baseline's is the estimate before (time companion on the run's mesh, then "
+                         "the mesh companion)")
     be.add_argument("--json-only", help=argparse.SUPPRESS)
     be.add_argument("--only", choices=["baseline", "current"], help=argparse.SUPPRESS)  # a launch of --baseline
     conv = _add(sub, "converge", "time-step and mesh refinement study of g_c (Richardson estimate)",

@@ -22,6 +22,13 @@ by side, on the same machine minutes apart, not absolute times from different da
 two variants are separate launches (each its own processes, so each peak memory is its own); in one
 process the peak is reset before every run (Linux), but memory the allocator kept from an earlier run may
 still count.
+
+``--error-estimate`` also times each size's error estimate (``stability.error_estimate``: its companion runs)
+after the size's run and reports its cost as a multiple of the run. With ``--baseline`` the baseline's
+estimate is the one before the companions were rearranged (:func:`estimate_before`: the time companion on
+the run's mesh, then the mesh companion, one after the other on all ranks); the current one is
+:func:`app.workflows.error_estimate.companion_error_estimate` (the time companion on the coarse mesh, both
+side by side on two or more ranks).
 """
 
 from __future__ import annotations
@@ -55,7 +62,8 @@ def size_config(name: str, overrides: list[str]) -> dict:
                          "output.checkpoint_every": 0})  # timings of the solver, not of checkpoints
 
 
-def bench_one(cfg: dict, comm, outdir: Path) -> dict | None:
+def bench_one(cfg: dict, comm, outdir: Path, estimate: str | None = None) -> dict | None:
+    """One size's timings; with ``estimate`` ("current" or "baseline") also its error estimate's."""
     from app.workflows.run import simulate
 
     timing.reset()
@@ -107,7 +115,46 @@ def bench_one(cfg: dict, comm, outdir: Path) -> dict | None:
             "screening": cfg["stability"]["screening"],
             "screened_steps": (s.get("stability_tests") or {}).get("screened_steps", 0),
             "per_step_split_s": {k: v / steps for k, v in split.items()},
-            "peak_rss_mb_per_rank": rss, "peak_rss_since_reset": per_run}
+            "peak_rss_mb_per_rank": rss, "peak_rss_since_reset": per_run,
+            **({"error_estimate": time_estimate(cfg, crit.get("growth_um"), comm, outdir, estimate, wall)}
+               if estimate and s["status"] == "buckled" else {})}
+
+
+def time_estimate(cfg: dict, g: float, comm, outdir: Path, which: str, run_wall: float) -> dict:
+    """The wall time of the run's error estimate (``which``: "current" or "baseline") and its bars."""
+    from app.workflows.error_estimate import companion_error_estimate
+
+    t0 = time.perf_counter()
+    est = (companion_error_estimate if which == "current" else estimate_before)(
+        variant_for_estimate(cfg), g, outdir, comm, progress=False)
+    wall = time.perf_counter() - t0
+    return {"layout": which, "wall_time_s": wall, "ratio_to_run": wall / run_wall,
+            **{k: est.get(k) for k in ("time_um", "mesh_um", "total_um", "time_companion_mesh")}}
+
+
+def variant_for_estimate(cfg: dict) -> dict:
+    from app.workflows.variants import variant
+
+    return variant(cfg, {"stability.error_estimate": True})
+
+
+def estimate_before(cfg: dict, g: float, outdir: Path, comm, progress: bool = False) -> dict:
+    """The error estimate as it was before (the baseline of ``--error-estimate``): the time companion on the
+    run's own mesh, then the mesh companion, one after the other on all ranks."""
+    from app.workflows import error_estimate as ee
+    from app.workflows.run import simulate
+    from app.workflows.variants import variant
+
+    out = {}
+    for study, order in (("time", ee.ASSUMED_TIME_ORDER), ("mesh", ee.ASSUMED_MESH_ORDER)):
+        c, direction = ee.companion_config(cfg, study)
+        s = simulate(variant(c, {"output.plot": False}), outdir / "error-estimate-before" / study, comm,
+                     progress=progress)
+        g_companion = (s.get("critical") or {}).get("growth_um")
+        out[f"{study}_um"] = None if g_companion is None else ee.companion_error(g, g_companion, order, direction)
+    out["total_um"] = sum(v or 0.0 for v in out.values())
+    out["time_companion_mesh"] = "the run's"
+    return out
 
 
 def reset_peak_memory() -> bool:
@@ -152,7 +199,7 @@ class BenchFailed(Exception):
 
 
 def run_bench(sizes: list[str], overrides: list[str], outdir: Path, comm, baseline: bool = False,
-              only: str | None = None) -> dict | None:
+              only: str | None = None, error_estimate: bool = False) -> dict | None:
     """The timings of every size (with ``baseline``, also of :data:`BASELINE`, run just before it; ``only``:
     just one of the two, "baseline" or "current"), or None once SIGINT/SIGTERM stopped a run or came between
     two runs (no further run starts: a benchmark cannot be resumed, its runs would be timed in parts)."""
@@ -169,7 +216,8 @@ def run_bench(sizes: list[str], overrides: list[str], outdir: Path, comm, baseli
             log.info(f"bench: {name} mesh (element size {cfg['mesh']['element_size']:g} mm, "
                      f"{cfg['mesh']['film_layers']} film layers) on {comm.size} rank(s), {label} settings")
             suffix = "-baseline" if label == "baseline" else ""
-            results[label][name] = r = bench_one(cfg, comm, outdir / f"run-{name}-np{comm.size}{suffix}")
+            results[label][name] = r = bench_one(cfg, comm, outdir / f"run-{name}-np{comm.size}{suffix}",
+                                                 label if error_estimate else None)
             if r is None:
                 return None
     out = {"ranks": comm.size, "sizes": results["current"], **_fits(results["current"])}
@@ -196,21 +244,22 @@ def _loglog_fit(points) -> float | None:
 
 
 def launch_ranks(ranks: list[int], sizes: list[str], overrides: list[str], outdir: Path,
-                 baseline: bool = False) -> dict | None:
+                 baseline: bool = False, error_estimate: bool = False) -> dict | None:
     """Run the benchmark under ``mpirun -n k`` for each k (a fresh launch each) and combine; None once
     interrupted (SIGINT/SIGTERM here or in a launch); :class:`BenchFailed` if a launch fails. With
     ``baseline``, the baseline and the current settings are two launches per k, one after the other."""
     out = {}
+    est = ["--error-estimate"] if error_estimate else []
     for k in ranks:
         if baseline:  # each variant in its own processes: its peak memory is its own
             parts = {}
             for only in ("baseline", "current"):
-                parts[only] = _launch(k, sizes, overrides, outdir, ["--baseline", "--only", only])
+                parts[only] = _launch(k, sizes, overrides, outdir, ["--baseline", "--only", only] + est)
                 if parts[only] is None:
                     return None
             out[k] = {**parts["current"], "baseline": parts["baseline"]["baseline"]}
         else:
-            out[k] = _launch(k, sizes, overrides, outdir, [])
+            out[k] = _launch(k, sizes, overrides, outdir, est)
             if out[k] is None:
                 return None
     return out
@@ -280,7 +329,9 @@ def against_baseline(base: dict, now: dict) -> dict:
             "factorizations_baseline": base["factorizations"], "factorizations": now["factorizations"],
             "g_c_um_baseline": g0, "g_c_um": g1,
             "g_c_relative_change": abs(g1 - g0) / abs(g0) if g0 and g1 is not None else None,
-            "N_c_baseline": base["N_c"], "N_c": now["N_c"]}
+            "N_c_baseline": base["N_c"], "N_c": now["N_c"],
+            **({"error_estimate_speedup": base["error_estimate"]["wall_time_s"] / now["error_estimate"]["wall_time_s"]}
+               if "error_estimate" in base and "error_estimate" in now else {})}
 
 
 def table(doc: dict) -> str:
@@ -323,6 +374,18 @@ def table(doc: dict) -> str:
         base_speedups = _rank_speedups({k: r["baseline"] for k, r in doc["runs"].items() if "baseline" in r})
         for k, sp in base_speedups.items():
             lines.append(f"baseline speedup 1 -> {k} ranks: " + ", ".join(f"{n} {v:.2f}" for n, v in sp.items()))
+    rows = [(k, label, name, r) for k, run in doc["runs"].items()
+            for label, sizes in (("baseline", run.get("baseline", {}).get("sizes", {})), ("current", run["sizes"]))
+            for name, r in sizes.items() if "error_estimate" in r]
+    if rows:
+        lines += ["", "Error estimate (companion runs) against its run (baseline: time companion on the run's mesh, "
+                  "then the mesh companion; current: time companion on the coarse mesh, side by side on >= 2 ranks):",
+                  "", "| ranks | size | settings | run [s] | estimate [s] | estimate / run | time bar [um] "
+                  "| mesh bar [um] | total [um] |", "|" + "---|" * 9]
+        for k, label, name, r in rows:
+            e = r["error_estimate"]
+            lines.append(f"| {k} | {name} | {label} | {r['wall_time_s']:.1f} | {e['wall_time_s']:.1f} | "
+                         f"{e['ratio_to_run']:.2f} | {_f(e['time_um'])} | {_f(e['mesh_um'])} | {_f(e['total_um'])} |")
     return "\n".join(lines)
 
 
@@ -383,7 +446,8 @@ def check(sizes: list[str], overrides: list[str], outdir, comm) -> None:
 
 
 def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], outdir: Path, comm,
-            json_only: str | None = None, baseline: bool = False, only: str | None = None) -> str | None:
+            json_only: str | None = None, baseline: bool = False, only: str | None = None,
+            error_estimate: bool = False) -> str | None:
     """``hydrobuckle bench``: run (or launch per rank count) every size and write bench.json and bench.md;
     returns the table (rank 0; '' elsewhere and for a ``--json-only`` launch), or None when interrupted (no
     bench.json: timings of a part of a run are no benchmark). A stale bench.json/bench.md goes first: a
@@ -398,10 +462,10 @@ def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], out
         if not json_only:
             writes.on_rank0(comm, outdir, clear)
         if ranks:
-            by_ranks = launch_ranks(ranks, sizes, overrides, outdir, baseline)
+            by_ranks = launch_ranks(ranks, sizes, overrides, outdir, baseline, error_estimate)
             doc = None if by_ranks is None else report(by_ranks)
         else:
-            result = run_bench(sizes, overrides, outdir, comm, baseline, only)
+            result = run_bench(sizes, overrides, outdir, comm, baseline, only, error_estimate)
             if result is not None and json_only:  # a launch of `bench --ranks`: for the launching process
                 path = Path(json_only)
                 writes.on_rank0(comm, path, writes.write_text, path, json.dumps(result))
