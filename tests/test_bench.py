@@ -105,7 +105,8 @@ def test_bench_error_estimate_against_the_layout_before(shared_tmp):
     a = doc["against_baseline"]["runs"][k]["coarse"]
     assert a["error_estimate_speedup"] == pytest.approx(e_base["wall_time_s"] / e_now["wall_time_s"], rel=1e-12)
     run = out / f"run-coarse-np{size}"
-    ranks = {s: json.loads((run / "error-estimate" / s / "summary.json").read_text())["ranks"] for s in ("time", "mesh")}
+    ranks = {s: json.loads((run / "error-estimate" / s / "summary.json").read_text())["ranks"]
+             for s in ("time", "mesh")}
     assert ranks == ({"time": 1, "mesh": 1} if size == 2 else {"time": size, "mesh": size})
     before = out / f"run-coarse-np{size}-baseline" / "error-estimate-before"
     assert all(json.loads((before / s / "summary.json").read_text())["ranks"] == size for s in ("time", "mesh"))

@@ -5,8 +5,8 @@ estimate (its companions are coarser; the sequence is finer), with its own Richa
 Case: the 0.3 mm bilayer strip (tests/cases.py SWELLING) at element 0.01 mm / 2 film layers, the level whose
 bar is tested; mesh levels 0.005/4, 0.0025/8, 0.00125/16 and time levels tolerance / 4, / 16, / 64 give
 the limits. Measured (serial): g = 6.8959 um; mesh bar 0.2090 um for a distance 0.2000 um to the mesh limit
-6.6959 um; time bar 0.0598 um for a distance 0.0569 um to the time limit 6.9528 um; total bar 0.269 um for
-0.143 um. Before the time companion's step bounds were coarsened with its tolerance (dt_max held the steps
+6.6959 um; time bar 0.0684 um (its companion on the coarse mesh; 0.0598 um on the run's mesh) for a distance
+0.0569 um to the time limit 6.9528 um (of the run's mesh); total bar 0.277 um for 0.143 um. Before the time companion's step bounds were coarsened with its tolerance (dt_max held the steps
 of the slow phase, so the companion was less than 2x coarser) the time bar was 0.0446 um: 22% short."""
 
 from __future__ import annotations
