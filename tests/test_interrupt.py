@@ -155,3 +155,60 @@ def test_sigterm_to_mpirun_stops_both_ranks_collectively(shared_tmp):
         assert len(valid_history(out / "history.csv")) >= 5  # the rows seen before the signal, none torn
         return
     _check_results(out, "SIGTERM", ranks=2)
+
+
+# a small bilayer that buckles within seconds, with its error estimate (the companions side by side on 2 ranks)
+ESTIMATE = """
+[geometry]
+length = 0.3
+substrate_thickness = 0.15
+[mesh]
+element_size = 0.005
+film_layers = 2
+substrate_grading = 1.25
+[time]
+end = 1.0
+dt_max = 0.01
+[stability]
+error_estimate = true
+[reduced]
+beside_2d = false
+[output]
+fields = false
+plot = false
+"""
+
+
+def test_sigterm_during_side_by_side_companions_keeps_the_answer(shared_tmp):
+    """A scheduler's SIGTERM to both ranks while the error estimate's companions run side by side (one per
+    rank): every group stops its companion, the ranks meet again, the run's own answer is written
+    (summary.json "buckled", g_c, each stopped companion's part None with its reason) and the job ends 143."""
+    cfg = shared_tmp / "estimate.toml"
+    out = shared_tmp / "estimate"
+    on_rank0(cfg.write_text, ESTIMATE)
+    cmd = ["mpirun", "-n", "2", "--oversubscribe", EXE, "run", str(cfg), "-o", str(out)]
+
+    def run():
+        proc = start(cmd)
+        try:
+            wait_rows(proc, out / "error-estimate" / "mesh" / "history.csv", 5)
+            for pid in _rank_pids(proc):
+                os.kill(pid, signal.SIGTERM)
+        except BaseException:
+            finish(proc, timeout=0)
+            raise
+        return finish(proc, timeout=120)
+
+    code, stdout, stderr = on_rank0(run)
+    assert code == 143, stdout[-2000:] + stderr[-2000:]
+    assert "Traceback" not in stderr and "PMIX ERROR" not in stderr, stderr[-2000:]
+    s = read_json(out / "summary.json")
+    assert s["status"] == "buckled" and s["critical"]["growth_um"] > 0
+    est = s["critical"]["discretization_error"]
+    companions = {st: read_json(out / "error-estimate" / st / "summary.json") for st in ("mesh", "time")}
+    assert companions["mesh"]["status"] == "interrupted" and companions["mesh"]["ranks"] == 1
+    for st, c in companions.items():
+        if c["status"] == "interrupted":  # the time companion may have ended before the signal
+            assert est[f"{st}_um"] is None and "interrupted" in est[f"{st}_note"], est
+    assert est["mesh_um"] is None and est["time_um"] is None  # no time error without the mesh companion's g_c
+    assert not (out / "error-estimate" / "time-run-mesh").exists()  # no new run after a signal
