@@ -125,34 +125,24 @@ def time_estimate(cfg: dict, g: float, comm, outdir: Path, which: str, run_wall:
     from app.workflows.error_estimate import companion_error_estimate
 
     t0 = time.perf_counter()
-    est = (companion_error_estimate if which == "current" else estimate_before)(
-        variant_for_estimate(cfg), g, outdir, comm, progress=False)
+    est = (companion_error_estimate if which == "current" else estimate_before)(cfg, g, outdir, comm, progress=False)
     wall = time.perf_counter() - t0
     return {"layout": which, "wall_time_s": wall, "ratio_to_run": wall / run_wall,
             **{k: est.get(k) for k in ("time_um", "mesh_um", "total_um", "time_companion_mesh")}}
 
 
-def variant_for_estimate(cfg: dict) -> dict:
-    from app.workflows.variants import variant
-
-    return variant(cfg, {"stability.error_estimate": True})
-
-
 def estimate_before(cfg: dict, g: float, outdir: Path, comm, progress: bool = False) -> dict:
     """The error estimate as it was before (the baseline of ``--error-estimate``): the time companion on the
-    run's own mesh, then the mesh companion, one after the other on all ranks."""
+    run's own mesh, then the mesh companion, one after the other on all ranks (into error-estimate-before)."""
     from app.workflows import error_estimate as ee
-    from app.workflows.run import simulate
-    from app.workflows.variants import variant
 
-    out = {}
+    log, out = logging_setup.get(), {}
+    plans = {study: ee.companion_plan(cfg, study, out, log) for study in ("time", "mesh")}
+    done = ee.side_by_side({study: p[0] for study, p in plans.items() if p is not None}, outdir, comm, progress,
+                           together=False, root="error-estimate-before")
     for study, order in (("time", ee.ASSUMED_TIME_ORDER), ("mesh", ee.ASSUMED_MESH_ORDER)):
-        c, direction = ee.companion_config(cfg, study)
-        s = simulate(variant(c, {"output.plot": False}), outdir / "error-estimate-before" / study, comm,
-                     progress=progress)
-        g_companion = (s.get("critical") or {}).get("growth_um")
-        out[f"{study}_um"] = None if g_companion is None else ee.companion_error(g, g_companion, order, direction)
-    out["total_um"] = sum(v or 0.0 for v in out.values())
+        ee.record_companion(out, study, done, plans[study], g, order)
+    out["total_um"] = sum(out[f"{s}_um"] or 0.0 for s in ("time", "mesh"))
     out["time_companion_mesh"] = "the run's"
     return out
 

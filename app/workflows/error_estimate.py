@@ -8,8 +8,8 @@ p and q. The time error is measured on the coarse mesh because there a run costs
 own: it assumes the time error does not depend much on the mesh (errors that add up). Measured: the
 time difference on the coarse mesh is 7% larger than on the run's mesh for the default bilayer (0.0539
 vs 0.0504 um), 14% larger for the 0.3 mm strip of tests/test_error_estimate.py (0.0684 vs 0.0598 um) and
-23% for the default tube (0.0557 vs 0.0454 um), so the bar errs on the safe side there. The result goes into the run's summary as
-``critical.discretization_error`` before summary.json is written.
+23% for the default tube (0.0557 vs 0.0454 um), so the bar errs on the safe side there. The result goes
+into the run's summary as ``critical.discretization_error`` before summary.json is written.
 
 Where a mesh cannot be coarsened (a user's .msh file, which can only be split; an odd number of film
 layers), the mesh companion is the mesh refined by 2 instead (a .msh file split once: 4x the cells),
@@ -62,31 +62,31 @@ def companion_error_estimate(cfg: dict, g_c_um: float, outdir, comm, progress: b
     out = {"method": f"companion runs coarsened by 2 in mesh (or refined where the mesh cannot be coarsened) and "
                      f"that coarse mesh coarsened by 2 in time; assumed orders {ASSUMED_TIME_ORDER:g} (time) and "
                      f"{ASSUMED_MESH_ORDER:g} (mesh)"}
-    mesh = _plan(cfg, "mesh", out, log)
+    mesh = companion_plan(cfg, "mesh", out, log)
     on_coarse = mesh is not None and mesh[1] == "coarsened"
-    time = _plan(mesh[0] if on_coarse else cfg, "time", out, log)
+    time = companion_plan(mesh[0] if on_coarse else cfg, "time", out, log)
     jobs = {study: job[0] for study, job in (("mesh", mesh), ("time", time)) if job is not None}
     for study, job in (("mesh", mesh), ("time", time)):
         if job is not None:
             log.info(f"error estimate: companion run {job[1]} in {study}"
                      + (" on the mesh companion's coarse mesh" if study == "time" and on_coarse else ""))
     done = side_by_side(jobs, outdir, comm, progress)
-    g_mesh = _record(out, "mesh", done, mesh, g_c_um, ASSUMED_MESH_ORDER)
+    g_mesh = record_companion(out, "mesh", done, mesh, g_c_um, ASSUMED_MESH_ORDER)
     if time is not None and on_coarse and g_mesh is None and not interrupt.pending(comm):
         # the coarse mesh has no onset to measure the time error against: the time companion on the run's mesh
         log.info(f"error estimate: the mesh companion has no answer; a time companion on the run's mesh instead "
                  f"({RUN_MESH_TIME})")
-        on_coarse, time = False, _plan(cfg, "time", out, log)
+        on_coarse, time = False, companion_plan(cfg, "time", out, log)
         if time is not None:
             done["time"] = side_by_side({RUN_MESH_TIME: time[0]}, outdir, comm, progress)[RUN_MESH_TIME]
     out["time_companion_mesh"] = "coarsened" if on_coarse else "the run's"
-    _record(out, "time", done, time, g_mesh if on_coarse else g_c_um, ASSUMED_TIME_ORDER)
+    record_companion(out, "time", done, time, g_mesh if on_coarse else g_c_um, ASSUMED_TIME_ORDER)
     out["total_um"] = sum(out[f"{s}_um"] or 0.0 for s in ("time", "mesh"))
     out["relative"] = out["total_um"] / g_c_um if g_c_um else None
     return out
 
 
-def _plan(base: dict, study: str, out: dict, log):
+def companion_plan(base: dict, study: str, out: dict, log):
     """(companion config, direction) of ``base`` in ``study``; None (its part noted in ``out``) if none."""
     from app.workflows.variants import variant
 
@@ -105,7 +105,7 @@ def _plan(base: dict, study: str, out: dict, log):
     return variant(c, {"output.plot": False}), direction
 
 
-def _record(out: dict, study: str, done: dict, job, g_base: float | None, order: float) -> float | None:
+def record_companion(out: dict, study: str, done: dict, job, g_base: float | None, order: float) -> float | None:
     """Put ``study``'s companion answer and its error against ``g_base`` into ``out``; return its g_c."""
     if job is None:
         return None
@@ -120,21 +120,22 @@ def _record(out: dict, study: str, done: dict, job, g_base: float | None, order:
     return r["g"]
 
 
-def side_by_side(jobs: dict, outdir, comm, progress: bool = True) -> dict:
-    """Run each companion config of ``jobs`` ({name: config}) into ``outdir/error-estimate/<name>``; return
-    {name: {"g": its g_c} or {"note": why it has none}} on every rank. With as many ranks as jobs or more,
-    the jobs run at the same time, each on its own group of ranks (the first job's group holds rank 0, whose
-    log shows its steps; the other groups log nothing, their results are in their directories), else one
-    after the other on all ranks. A result file that cannot be written in any group is raised on every rank
-    (:class:`~app.io.writes.ResultWriteError`) once every group has ended; any other failure of a companion
-    becomes its note."""
+def side_by_side(jobs: dict, outdir, comm, progress: bool = True, together: bool = True,
+                 root: str = "error-estimate") -> dict:
+    """Run each companion config of ``jobs`` ({name: config}) into ``outdir/<root>/<name>``; return
+    {name: {"g": its g_c} or {"note": why it has none}} on every rank. With ``together`` and as many ranks as
+    jobs or more, the jobs run at the same time, each on its own group of ranks (the first job's group holds
+    rank 0, whose log shows its steps; the other groups log nothing, their results are in their
+    directories), else one after the other on all ranks. A result file that cannot be written in any group
+    is raised on every rank (:class:`~app.io.writes.ResultWriteError`) once every group has ended; any other
+    failure of a companion becomes its note."""
     from app.io.writes import ResultWriteError
     from app.workflows.run import simulate
 
     studies = list(jobs)
     if not studies:
         return {}
-    groups = len(studies) if comm.size >= len(studies) > 1 else 1
+    groups = len(studies) if together and comm.size >= len(studies) > 1 else 1
     color = comm.rank * groups // comm.size  # contiguous groups, the larger ones first
     sub = comm.Split(color, comm.rank) if groups > 1 else comm
     if groups > 1:
@@ -151,7 +152,7 @@ def side_by_side(jobs: dict, outdir, comm, progress: bool = True) -> dict:
                     results[study] = {"note": "not run: a result file could not be written"}
                     continue
                 try:
-                    s = simulate(jobs[study], Path(outdir) / "error-estimate" / study, sub, progress=progress)
+                    s = simulate(jobs[study], Path(outdir) / root / study, sub, progress=progress)
                 except ResultWriteError as err:
                     write_error = (err.path, err.reason)
                     results[study] = {"note": str(err)}
