@@ -76,3 +76,16 @@ substrate_grading = 1.25
 [reduced]
 beside_2d = false
 """
+
+
+# A 0.3 mm wide bilayer strip that buckles within seconds (60 x 2 film elements), as TOML: tests append their
+# own tables.
+BUCKLING_STRIP_TOML = """
+[geometry]
+length = 0.3
+substrate_thickness = 0.15
+[mesh]
+element_size = 0.005
+film_layers = 2
+substrate_grading = 1.25
+"""

@@ -3,6 +3,7 @@
 import csv
 import json
 
+from cases import BUCKLING_STRIP_TOML
 from mpi4py import MPI
 
 from app import cli, config
@@ -79,14 +80,7 @@ def test_solver_failure_exits_1_and_keeps_history(shared_tmp):
     assert len(rows) >= 1 and float(rows[0]["time"]) == 0.0
 
 
-BUCKLING = """
-[geometry]
-length = 0.3
-substrate_thickness = 0.15
-[mesh]
-element_size = 0.005
-film_layers = 2
-substrate_grading = 1.25
+BUCKLING = BUCKLING_STRIP_TOML + """
 [time]
 end = 1.0
 dt_max = 0.05

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import signal
 
+from cases import BUCKLING_STRIP_TOML
 from conftest import (EXE, finish, on_rank0, open_mpi_major, read_json, session_processes, start, valid_history,
                       wait_rows)
 
@@ -158,14 +159,7 @@ def test_sigterm_to_mpirun_stops_both_ranks_collectively(shared_tmp):
 
 
 # a small bilayer that buckles within seconds, with its error estimate (the companions side by side on 2 ranks)
-ESTIMATE = """
-[geometry]
-length = 0.3
-substrate_thickness = 0.15
-[mesh]
-element_size = 0.005
-film_layers = 2
-substrate_grading = 1.25
+ESTIMATE = BUCKLING_STRIP_TOML + """
 [time]
 end = 1.0
 dt_max = 0.01
