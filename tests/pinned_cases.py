@@ -41,8 +41,10 @@ def compute(name: str, outdir: Path, comm) -> dict:
     path, overrides = CASES[name]
     # plain Newton, as when the results were pinned: factor reuse (solver.reuse) takes another path to each
     # converged state and moves it within Newton's tolerance (lambda_min_before of the bilayer by 2e-8
-    # relative, g_c by 1e-12); tests/test_reuse.py compares the two solvers
-    overrides = [*overrides, "solver.reuse=false"]
+    # relative, g_c by 1e-12); tests/test_reuse.py compares the two solvers. The elementary step controller,
+    # also as when pinned: the predictive default (time.controller) takes other steps to the same answers
+    # within their time error, which tests/test_step_control.py and the physics tests check
+    overrides = [*overrides, "solver.reuse=false", "time.controller=elementary"]
     cfg = config.load(root / path, overrides) if path else config.resolve({}, overrides)
     summary = simulate(cfg, outdir, comm, progress=False)
     with open(outdir / "history.csv") as f:

@@ -79,14 +79,16 @@ def test_max_steps_stops_the_run_as_a_failure(shared_tmp):
     assert summary["final"]["time"] == float(rows[-1]["time"]) < 1.0
 
 
-def test_error_control_rejects_steps_and_bounds_every_accepted_error(comm):
+@pytest.mark.parametrize("controller", ["predictive", "elementary"])
+def test_error_control_rejects_steps_and_bounds_every_accepted_error(comm, controller):
     """A tiny tolerance forces rejections; every accepted step's estimate is within the tolerance
-    (only the first step has none), and each accepted step is at most the controller's proposal
-    dt * clamp(0.9 sqrt(tol/err), 0.2, 2) of the step before (smaller only after a rejection, or when
-    clipped at the end)."""
+    (only the first step has none), and each accepted step is at most the controller's proposal of the step
+    before: dt * clamp(f, 0.2, 2), f = 0.9 sqrt(tol/err), divided by sqrt(rho) for the predictive rule while
+    the error constant err/dt^2 grew by rho > 1 over the step (README, Time stepping), written out here from
+    the history's columns. Smaller only after a rejection, or when clipped at the end."""
     tol = 1e-6
     cfg = small_bilayer(**{"time.tolerance": tol, "time.dt_initial": 0.01, "time.end": 0.5,
-                           "stability.enabled": "false"})
+                           "stability.enabled": "false", "time.controller": controller})
     _, st, rows = run_to_end(cfg, comm)
     assert st.rejected > 0
     errs = [r.error_estimate for r in rows[1:]]
@@ -95,10 +97,14 @@ def test_error_control_rejects_steps_and_bounds_every_accepted_error(comm):
     assert rows[-1].time == pytest.approx(0.5, abs=1e-12)
     smaller = 0
     dt_max = cfg["time"]["dt_max"]
-    for a, b in zip(rows[1:-1], rows[2:]):
+    for before, a, b in zip(rows[0:-2], rows[1:-1], rows[2:]):
         if not math.isfinite(a.error_estimate):
             continue
-        proposal = min(dt_max, a.dt * min(GROW_MAX, max(SHRINK_MIN, SAFETY * math.sqrt(tol / a.error_estimate))))
+        f = SAFETY * math.sqrt(tol / a.error_estimate)
+        if controller == "predictive" and math.isfinite(before.error_estimate) and before.error_estimate > 0:
+            rho = (a.error_estimate / a.dt**2) / (before.error_estimate / before.dt**2)
+            f /= math.sqrt(max(rho, 1.0))
+        proposal = min(dt_max, a.dt * min(GROW_MAX, max(SHRINK_MIN, f)))
         assert b.dt <= proposal * (1 + 1e-12)
         smaller += b.dt < proposal * (1 - 1e-12)
     assert smaller <= st.rejected + 1  # + the last step, clipped at time.end

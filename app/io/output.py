@@ -112,6 +112,7 @@ class ResultWriter:
         self._header = True  # history.csv still needs its header line
         self._history_failed = False
         self._xdmf = None
+        self._fields_step = None  # the accepted step whose fields were written last
         self.error: ResultWriteError | None = None
         self.rows: list[dict] = []
         keep = set() if resume_rows is None else {"history.csv", *(MODE_FILES if keep_mode else ())}
@@ -218,10 +219,12 @@ class ResultWriter:
 
             self._fields.append((f, _Filled(fill)))
 
-    def write_fields(self, t: float, step: int = 0) -> None:
-        """The fields at time t, if they are written at accepted step number ``step``."""
-        if self._xdmf is None or step % self.settings.every:
+    def write_fields(self, t: float, step: int = 0, last: bool = False) -> None:
+        """The fields at time t, if they are written at accepted step number ``step`` (every
+        ``output.every`` steps; with ``last``, the run's final state, unless that step was written)."""
+        if self._xdmf is None or (step % self.settings.every if not last else step == self._fields_step):
             return
+        self._fields_step = step
         with timing.timed("output"):
             for f, expr in self._fields:
                 if isinstance(expr, _Filled):  # a field that is not a UFL expression (the contact traction)

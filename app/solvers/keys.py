@@ -12,6 +12,9 @@ TIME: dict[str, Key] = {
     "dt_min": key(float, 1.0e-9, gt(0), "smallest step before the run is declared failed [s]"),
     "tolerance": key(float, 5.0e-4, gt(0), "local error tolerance (fluid content) of the adaptive step"),
     "adaptive": key(bool, True, None, "false: fixed steps of dt_initial (cut back only on divergence)"),
+    "controller": key(str, "predictive", one_of("predictive", "elementary"),
+                      "the adaptive step's rule: elementary = dt 0.9 sqrt(tol/err); predictive = the same, "
+                      "slowed by the growth of err/dt^2 over the last step while it grows (fewer rejected steps)"),
     "max_steps": key(int, 100000, ge(1)),
     "stop_at_equilibrium": key(float, 0.0, ge(0.0),
                                "end the run (status equilibrium) once the relative fluid uptake rate "

@@ -39,15 +39,17 @@ class TimeSettings:
     adaptive: bool = True
     max_steps: int = 100000
     stop_at_equilibrium: float = 0.0  # threshold of the relative uptake rate (0 = off)
+    controller: str = "predictive"  # the adaptive step's rule (app.solvers.step_control)
 
     @classmethod
     def from_config(cls, cfg: dict) -> TimeSettings:
         t = cfg["time"]
         return cls(t["end"], t["dt_initial"], t["dt_min"], t["dt_max"], t["tolerance"], t["adaptive"],
-                   t["max_steps"], t.get("stop_at_equilibrium", 0.0))
+                   t["max_steps"], t.get("stop_at_equilibrium", 0.0), t.get("controller", "predictive"))
 
     def step_control(self) -> StepControl:
-        return StepControl(self.tolerance, self.dt_min, self.dt_max, self.adaptive, self.dt_initial)
+        return StepControl(self.tolerance, self.dt_min, self.dt_max, self.adaptive, self.dt_initial,
+                           self.controller)
 
 
 ENERGY_INCREASED = -101  # a minimizer solve whose energy ended above its initial guess's (a rejection)
@@ -110,16 +112,21 @@ class Snapshot:
     step: int
     inflow: float
     dt_next: float
+    err_prev: float = float("nan")  # the last accepted step's error estimate (NaN: none since a kink)
 
     #: the scalars a checkpoint stores with the arrays (in this order)
-    SCALARS: ClassVar[tuple[str, ...]] = ("dt_prev", "history_valid", "t", "step", "inflow", "dt_next")
+    SCALARS: ClassVar[tuple[str, ...]] = ("dt_prev", "history_valid", "t", "step", "inflow", "dt_next",
+                                          "err_prev")
 
     def scalars(self) -> dict:
         return {k: getattr(self, k) for k in self.SCALARS}
 
     @classmethod
     def from_parts(cls, state: np.ndarray, rate_u: np.ndarray, dQ_prev: np.ndarray, scalars: dict) -> Snapshot:
-        return cls(state, rate_u, dQ_prev, *(scalars[k] for k in cls.SCALARS))
+        """``scalars`` of a checkpoint written before err_prev was stored resume without it (NaN: the next
+        step's proposal follows the elementary rule once)."""
+        values = {k: scalars[k] for k in cls.SCALARS if k in scalars}
+        return cls(state, rate_u, dQ_prev, **values)
 
 
 @dataclass(frozen=True)
@@ -177,6 +184,7 @@ class TimeStepper:
         self.step = 0
         self.inflow = 0.0
         self.dt_next = time.dt_initial
+        self.err_prev = float("nan")  # the error estimate of the accepted step before the last (the trend)
         self.rejected = 0
         self.failed_solves = 0
         self.equilibrium_threshold = time.stop_at_equilibrium
@@ -238,7 +246,7 @@ class TimeStepper:
 
     def snapshot(self) -> Snapshot:
         return Snapshot(self.system.state.x.array.copy(), self.rate_u.copy(), self.dQ_prev.copy(), self.dt_prev,
-                        self.history_valid, self.t, self.step, self.inflow, self.dt_next)
+                        self.history_valid, self.t, self.step, self.inflow, self.dt_next, self.err_prev)
 
     @staticmethod
     def snapshot_of(state: np.ndarray, rate_u: np.ndarray, dQ_prev: np.ndarray, scalars: dict) -> Snapshot:
@@ -251,6 +259,7 @@ class TimeStepper:
         self.dQ_prev[:] = snap.dQ_prev
         self.dt_prev, self.history_valid = snap.dt_prev, snap.history_valid
         self.t, self.step, self.inflow, self.dt_next = snap.t, snap.step, snap.inflow, snap.dt_next
+        self.err_prev = snap.err_prev
 
     def resume_from(self, snap: Snapshot, counters: dict) -> None:
         """Continue from a checkpoint's current snapshot and :meth:`counters`; the unknown holds the last
@@ -420,6 +429,7 @@ class TimeStepper:
         self.dQ_prev[:] = w[s.q_dofs]
         state[s.u_dofs] = w[s.u_dofs]  # the new state: u_n = u, Q_n += dQ
         state[s.q_dofs] += w[s.q_dofs]
+        prev = (self.dt_prev, self.err_prev)
         self.dt_prev = dt
         self.t += dt
         self.step += 1
@@ -427,7 +437,8 @@ class TimeStepper:
         crossed_kink = any(abs(self.t - k) <= 1e-12 * max(1.0, k) for k in self.kinks)
         self.history_valid = not crossed_kink
         if self.control.adaptive:
-            self.dt_next = self.control.proposal(dt, err)
+            self.dt_next = self.control.proposal(dt, err, prev)
+        self.err_prev = err if not crossed_kink else float("nan")  # no trend across a kink
         return self.record(dt, its, err)
 
     def record(self, dt: float, its: int, err: float) -> StepRecord:

@@ -17,7 +17,7 @@ has only the displacement dofs and factorizes faster than K). ``R_accepted_steps
 iterations in the bound (history.csv), leaving rejected and bisection solves in the time only.
 
 ``--baseline`` runs every size twice in the same invocation, first with :data:`BASELINE` (the settings before
-factor reuse) and then with the current defaults, and reports the ratios of the two: speedups measured side
+factor reuse and the predictive step controller) and then with the current defaults, and reports the ratios of the two: speedups measured side
 by side, on the same machine minutes apart, not absolute times from different days. With ``--ranks`` the
 two variants are separate launches (each its own processes, so each peak memory is its own); in one
 process the peak is reset before every run (Linux), but memory the allocator kept from an earlier run may
@@ -47,8 +47,9 @@ from app import config, interrupt, logging_setup, timing
 
 SIZES = {"coarse": 2.0, "default": 1.0, "fine": 0.7, "finer": 0.5}  # element size x s, film layers / s
 #: ``--baseline``: the overrides that restore the settings before the performance work (a factorization every
-#: Newton iteration); they come after the user's --set, so a baseline run is the baseline whatever is set
-BASELINE = ["solver.reuse=false"]
+#: Newton iteration, the elementary step controller); they come after the user's --set, so a baseline run is the
+#: baseline whatever is set
+BASELINE = ["solver.reuse=false", "time.controller=elementary"]
 
 
 def size_config(name: str, overrides: list[str]) -> dict:

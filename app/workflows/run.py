@@ -83,6 +83,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         loop.monitor = monitor
         status, message = loop.run(stop_after)
     problem, stepper, tracker, writer = loop.problem, loop.stepper, loop.tracker, loop.writer
+    if status != "interrupted":  # the final state, also where it is not an output.every step
+        writer.write_fields(stepper.t, stepper.step, last=True)
     summary = summarize(status if status == "interrupted" else tracker.status(status), message, writer.rows[-1],
                         problem, stepper, tracker, settings, cfg, time.perf_counter() - wall0)
     if problem.contact is not None:
