@@ -205,18 +205,25 @@ ON_BRANCH = ("stability.after_onset=branch", "time.end=1.3", "time.adaptive=fals
 ON_BRANCH_ADAPTIVE = ("stability.after_onset=branch", "time.end=1.3")
 
 
-@pytest.mark.parametrize("extra, stop", [((), 8), (AFTER_CROSSINGS, 40), (ON_BRANCH, 100), (ON_BRANCH_ADAPTIVE, None)],
+@pytest.mark.parametrize("extra, stop", [((), 8), (AFTER_CROSSINGS, "crossings"), (ON_BRANCH, 100),
+                                         (ON_BRANCH_ADAPTIVE, "switch")],
                          ids=["before-onset", "after-crossings", "on-a-branch", "on-a-branch-adaptive"])
 def test_resume_continues_like_an_uninterrupted_run(extra, stop, shared_tmp, comm):
     """Stopped after ``stop`` steps (as an interrupt stops it: a checkpoint of that step), resumed: the same
     history.csv, onset, crossings and counters as the run never stopped. after-crossings: stopped past
-    the first three crossings, whose mode files the resumed directory keeps."""
+    the step where the uninterrupted run has counted three crossings or more (its mode files the resumed
+    directory keeps); on-a-branch-adaptive: 5 steps past the branch switch. Both taken from the uninterrupted
+    run, so that any change of the step sizes keeps the stop where it is meant to be."""
     cfg = swelling_case(*EVERY, *extra)
     full = simulate(cfg, shared_tmp / "full", comm, progress=False)
-    if stop is None:  # 5 steps past the branch switch
+    rows = read_csv(shared_tmp / "full" / "history.csv")
+    crossed = 0
+    if stop == "switch":
         switch = full["postbuckling"]["switches"][0]["time"]
-        stop = 5 + max(int(r["step"]) for r in read_csv(shared_tmp / "full" / "history.csv")
-                       if float(r["time"]) <= switch + 1e-12)
+        stop = 5 + max(int(r["step"]) for r in rows if float(r["time"]) <= switch + 1e-12)
+    elif stop == "crossings":
+        stop, crossed = next((int(r["step"]), int(r["negative_eigenvalues"])) for r in rows
+                             if int(r["negative_eigenvalues"]) >= 3)
     assert full["status"] == "buckled" and full["steps"] > stop + 3
     part = shared_tmp / "part"
     stopped = simulate(cfg, part, comm, progress=False, stop_after=stop)
@@ -224,7 +231,7 @@ def test_resume_continues_like_an_uninterrupted_run(extra, stop, shared_tmp, com
     resume = checkpoint.check(part, cfg, comm)
     assert resume.meta["step"] == stop and len(resume.rows) == stop + 1
     if extra is AFTER_CROSSINGS:
-        assert resume.crossings == 3 and (part / "mode_surface.csv").is_file()
+        assert resume.crossings == crossed and (part / "mode_surface.csv").is_file()
     if extra in (ON_BRANCH, ON_BRANCH_ADAPTIVE):  # stopped on the branch: the minimizing solver and switch resumed
         assert resume.meta["stepper"]["minimizing"] and resume.meta["tracker"]["branch"]["switches"]
     resumed = simulate(cfg, part, comm, progress=False, resume=resume)

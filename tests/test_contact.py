@@ -323,13 +323,17 @@ def test_the_contact_traction_field_is_on_the_slit_and_balanced(slit_meshes, tmp
 @long_physics
 def test_a_tube_passage_folds_all_around_and_is_followed_in_contact(tmp_path):
     """A closed surface: the small tube of tests/cases.py (14 wrinkles on its branch) folds at t = 1.41 s,
-    where a run without contact ends (status contact). With contact it runs to time.end: every trough has
-    folded into a contact zone (as many zones as wrinkles), the zones lie all around the passage, the
-    folded state is stable with the contact's Hessian in the criterion (no negative eigenvalue at the end:
-    without it the tracker reported crossings in deep contact and stopped at max_crossings), and no state
-    overlaps by more than GAP_LIMIT of an element. Measured (the same run to t = 4 s): 14 zones, contact
-    length 0.18 mm near t = 2 s (0.56 mm at 4 s), penetration at most 3.6e-6 mm (3.6e-4 of an element), 9
-    branch crossings, all before t = 1.66 s; about 2 min."""
+    where a run without contact ends (status contact). With contact it runs to time.end: the troughs fold
+    into contact zones all around the passage, the folded state is stable with the contact's Hessian in the
+    criterion (no negative eigenvalue at the end: without it the tracker reported crossings in deep contact
+    and stopped at max_crossings), and no state overlaps by more than GAP_LIMIT of an element.
+    Near t = 1.655 s the folded passage goes through a secondary instability (up to 4 negative eigenvalues,
+    30-70 minimizer iterations a step) whose outcome roundoff decides: on Debian 12 every trough keeps its
+    own zone (14 zones at t = 2 s; 0.56 mm in contact at t = 4 s), on Debian 13 the pattern reorganizes (12
+    zones at t = 2 s, one of them joining two neighbouring troughs' tips). So the zones are counted against
+    the wrinkles with that margin: at least 3/4 of them, none more. Penetration at most 4.2e-6 mm (4e-4 of
+    an element); about 2 min. On Debian 13 a step into the instability overshoots the pairing (a node
+    carried through the surface in one step) and is cut back, which the run survives."""
     from cases import SMALL_TUBE
 
     from app.workflows.run import simulate
@@ -343,7 +347,8 @@ def test_a_tube_passage_folds_all_around_and_is_followed_in_contact(tmp_path):
     first = s["creases"]["first_contact"]
     assert first is not None and 1.40 < first["time"] < 1.42
     last = rows[-1]
-    assert int(last["creases"]) == int(float(last["wrinkle_count"])) == len(s["creases"]["zones"])
+    zones, wrinkles = len(s["creases"]["zones"]), int(float(last["wrinkle_count"]))
+    assert int(last["creases"]) == zones and 0.75 * wrinkles <= zones <= wrinkles
     assert int(last["negative_eigenvalues"]) == 0
     centres = np.array([[np.mean(z["x_mm"]), np.mean(z["y_mm"])] for z in s["creases"]["zones"]])
     angles = np.sort(np.arctan2(centres[:, 1], centres[:, 0]))

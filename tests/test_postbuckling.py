@@ -301,6 +301,37 @@ def test_a_failed_attempt_that_folds_is_cut_back_before_it_ends_the_run(failing,
         assert s["final"]["time"] == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("overshoots", [1, None], ids=["once", "always"])
+def test_a_converged_step_that_passes_through_the_penalty_is_cut_back(overshoots, monkeypatch, tmp_path):
+    """With self-contact, a converged branch state whose surface crossed itself where the penalty holds no
+    pair is the step's overshoot (a node carried past the pairing's reach by one iterate): the step is
+    rejected and a shorter one tried, and the run goes on to time.end. Only when every shorter step down
+    to time.dt_min overshoots too does it end, with status contact and the penalty's message."""
+    from app.onset.contact import OVERRUN, Limit, ModelLimits
+
+    seen = {"checks": 0, "reported": [], "dts": []}
+
+    def check(self, array):
+        seen["checks"] += 1
+        if seen["checks"] >= 6 and (overshoots is None or len(seen["reported"]) < overshoots):
+            limit = Limit("contact", (0.0625, 0.5), "the surface folds onto itself near the reference point "
+                          "(0.0625, 0.5) mm, where the contact penalty holds no pair", OVERRUN, overshoot=True)
+            seen["reported"].append(limit)
+            return limit
+        return None
+
+    monkeypatch.setattr(ModelLimits, "__call__", check)
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    s = simulate(_compression(), base / "out", comm, progress=False)
+    if overshoots == 1:
+        assert s["status"] == "buckled" and s["final"]["time"] == pytest.approx(1.0), s["message"]
+        assert len(seen["reported"]) == 1 and s["rejected_steps"] >= 1
+    else:  # 0.02 s cut back by 4 per attempt below dt_min = 1e-9 s: 13 attempts of the step
+        assert s["status"] == "contact" and "holds no pair" in s["message"] and OVERRUN in s["message"]
+        assert len(seen["reported"]) == 1 + math.floor(math.log(0.02 / 1e-9) / math.log(4))
+
+
 def test_segments_cross_finds_a_fold_and_not_a_steep_wave():
     x = np.linspace(0, 1, 200)
     wave = np.stack([x, 0.3 * np.sin(8 * np.pi * x)], axis=1)  # slopes up to 7.5, no overlap
@@ -489,19 +520,18 @@ def test_a_tube_branch_is_followed_around_its_closed_passage(monkeypatch, tmp_pa
     runs to time.end without a fold, keeps the switched mode's count, and its amplitude (the radial profile
     without its n = 0 and n = 1 Fourier parts) equals the geometric one (distance from the least-squares
     circle through the deformed passage) and ignores a rigid translation of the state."""
-    from app.solvers.stepping import TimeStepper
+    from app.onset.contact import ModelLimits
 
     from cases import SMALL_TUBE
 
     states = []
-    check = TimeStepper._check_limits
+    check = ModelLimits.accepted
 
-    def recorded(self, array, t):
-        if self.minimizing:
-            states.append((t, self.limits.p, array.copy()))  # the branch limits hold the problem
-        return check(self, array, t)
+    def recorded(self, array, t, retry=False):  # every converged branch state, as the stepper checks it
+        states.append((t, self.p, array.copy()))
+        return check(self, array, t, retry)
 
-    monkeypatch.setattr(TimeStepper, "_check_limits", recorded)
+    monkeypatch.setattr(ModelLimits, "accepted", recorded)
     comm = MPI.COMM_WORLD
     base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
     cfg = config.resolve({**SMALL_TUBE, "stability": {"after_onset": "branch", "error_estimate": False}},

@@ -30,6 +30,7 @@ class Limit:
     where: tuple[float, float]
     detail: str
     consequence: str = "the model has no contact and no inverted elements, the branch cannot be followed further"
+    overshoot: bool = False  # a converged state that a shorter step may avoid (the stepper retries it)
 
 
 OVERRUN = "the contact penalty cannot hold this state, the branch cannot be followed further"
@@ -149,7 +150,8 @@ def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
     if len(held) and np.min(np.linalg.norm(held - np.asarray(crossing.where), axis=1)) <= 2 * pen.seg_length.max():
         return None  # the penalty's own small overlap where the surface is in contact
     return Limit("contact", crossing.where, crossing.detail + ", where the contact penalty holds no pair (the "
-                 "surface passed through itself in one step: a shorter step or a stiffer penalty)", OVERRUN)
+                 "surface passed through itself in one step: a shorter step or a stiffer penalty)", OVERRUN,
+                 overshoot=True)
 
 
 class ModelLimits:
@@ -198,8 +200,16 @@ class ModelLimits:
         if self._folded is not None:
             raise ModelLimit(self._folded, t_try, accepted=t)
 
-    def accepted(self, array: np.ndarray, t: float) -> None:
-        """ModelLimit if the accepted state ``array`` (its displacement dofs) reaches a limit."""
+    def accepted(self, array: np.ndarray, t: float, retry: bool = False) -> Limit | None:
+        """The checks of a converged step's state ``array`` (its displacement dofs): None, it is accepted;
+        ModelLimit if it reaches a limit. With self-contact, a surface that crossed itself where the penalty
+        holds no pair is the step's overshoot, not yet the branch's end: the pairing follows every Newton
+        iterate but reaches only ``REACH`` segment lengths through the surface, and a node that one iterate
+        carries farther is missed. With ``retry`` (a shorter step is left) that limit is returned and the
+        stepper cuts the step back; without, it ends the run."""
         limit = self._of(array)
-        if limit is not None:
-            raise ModelLimit(limit, t)
+        if limit is None:
+            return None
+        if limit.overshoot and retry:
+            return limit
+        raise ModelLimit(limit, t)

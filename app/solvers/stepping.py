@@ -368,13 +368,17 @@ class TimeStepper:
                 self.rejected += 1
                 dt = control.shrink(dt, err)
                 continue
+            if limits is not None:  # on the branch (the checks read the displacement dofs: w's are the new ones)
+                new_dt = control.cut_back(dt)
+                limit = limits.accepted(self.system.w.x.array, self.t + dt, retry=new_dt >= control.dt_min)
+                if limit is not None:  # an overshoot of the contact pairing: rejected, a shorter step tried
+                    self.rejected += 1
+                    self.log(f"  the step to t = {self.t + dt:.6g} s (dt = {dt:.3g} s) overshoots: {limit.detail}; "
+                             f"cutting back to {new_dt:.3g} s")
+                    dt = new_dt
+                    continue
             break
         return self._accept(dt, res.iterations, err)
-
-    def _check_limits(self, array: np.ndarray, t: float) -> None:
-        """On the branch: :class:`ModelLimit` if the accepted state ``array`` reaches a limit."""
-        if self.limits is not None:
-            self.limits.accepted(array, t)
 
     def _diagnose(self, dt: float, reason: int, failures: int) -> None:
         """After a step failed at 4 dt and again at dt for the same reason: is the last converged state
@@ -421,8 +425,6 @@ class TimeStepper:
 
     def _accept(self, dt: float, its: int, err: float) -> StepRecord:
         s = self.system
-        if self.minimizing:  # the checks read the displacement dofs only: w's are the step's new ones
-            self._check_limits(s.w.x.array, self.t + dt)
         influx = s.influx()
         w, state = s.w.x.array, s.state.x.array
         self.rate_u[:] = w[s.u_dofs] - state[s.u_dofs]
