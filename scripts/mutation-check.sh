@@ -80,6 +80,11 @@ MUTATIONS = [
     ("a new crossing on a branch not detected (the count only falls there)", "app/onset/tracker.py",
      r"if nneg > self\.count:", "if nneg > self.count and not self.stepper.minimizing:",
      ["tests/test_postbuckling.py::test_branch_crossings_on_a_branch_are_detected"]),
+    ("after a switch the perturbed state's count alone is the reference (the same instability a new crossing)",
+     "app/onset/tracker.py", r"self\.count = max\(self\.screen\.start\(\), nneg\)",
+     "self.count = self.screen.start()",
+     ["tests/test_postbuckling.py::"
+      "test_a_switch_that_lowers_the_count_does_not_make_the_same_instability_a_new_crossing"]),
     ("drained branch switch with its fluid content of the wrong sign (phase)", "app/solvers/stability.py",
      r"b\.scale\(-1\.0\)", "b.scale(1.0)",
      ["tests/test_postbuckling.py::test_drained_switch_leaves_the_chemical_potential_unperturbed"]),

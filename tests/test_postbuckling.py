@@ -686,3 +686,55 @@ def test_branch_crossings_on_a_branch_are_detected(tmp_path):
     assert len(pb["switches"]) >= 2 and pb["switches"][1]["time"] >= hi - 1e-12
     assert pb["switches"][1]["wrinkle_count"] == second["first_mode_wrinkle_count"]
     assert s["status"] == "contact", s["message"]
+
+
+def test_a_switch_that_lowers_the_count_does_not_make_the_same_instability_a_new_crossing():
+    """After a switch the branch's reference count is never below the crossing's unstable end (an equilibrium),
+    whatever the perturbed state counts: in contact a perturbation of 0.1 um can open pairs and count fewer
+    (measured on the paper's bilayer: 0 at the perturbed state, 1 at every converged state, and a crossing
+    recorded at every step). The same count again is the same instability; one more is a new crossing, and
+    fewer is the branch settling. Stand-ins for the stepper, screen, bisection and switch: the rule only."""
+    from types import SimpleNamespace
+
+    from app.onset.policy import CrossingPolicy
+    from app.onset.tracker import OnsetTracker, StabilitySettings
+
+    state = {"t": 1.0}
+    screened = []  # the exact counts the screen reports, one per accepted step
+    perturbed = {"count": 0}
+    located, switched = [], []
+
+    def snap(t=None):
+        return SimpleNamespace(t=state["t"] if t is None else t)
+
+    stepper = SimpleNamespace(minimizing=True, restore=lambda s: state.update(t=s.t), snapshot=snap)
+    screen = SimpleNamespace(screening="exact", screen=lambda: screened.pop(0), start=lambda: perturbed["count"],
+                             confirm=lambda count, nneg: (nneg, snap(state["t"] - 0.01), snap()),
+                             accepted=lambda snap: None, restart=lambda snap: None)
+
+    def locate(lo, hi, base_count):
+        located.append(base_count)
+        return SimpleNamespace(hi=hi, lo=lo, hi_count=base_count + 1, time=hi.t, growth_mm=0.01, wrinkle_count=9)
+
+    tracker = object.__new__(OnsetTracker)
+    tracker.settings = StabilitySettings(policy=CrossingPolicy.from_flags(False, 100, "branch"))
+    tracker.stepper, tracker.screen, tracker.log, tracker.surface = stepper, screen, lambda msg: None, None
+    tracker.bisection = SimpleNamespace(locate=locate)
+    tracker.branch = SimpleNamespace(switch=lambda crossing: switched.append(crossing.time))
+    tracker.crossings, tracker.restabilized, tracker.count, tracker._bracket = ["the onset"], [], 0, None
+
+    def step(count: int) -> bool:
+        state["t"] += 0.01
+        screened.append(count)
+        tracker.test(SimpleNamespace(time=state["t"], growth_mm=0.01, step=1, extra={}))
+        return tracker.resolve()
+
+    assert not step(1) and len(tracker.crossings) == 2 and located == [0]  # a crossing, switched along
+    assert tracker.count == 1  # the unstable end's count, not the perturbed state's 0
+    for _ in range(3):  # the same instability at the next converged states: no new crossing
+        assert not step(1) and len(tracker.crossings) == 2
+    assert not step(2) and len(tracker.crossings) == 3 and located == [0, 1]  # one more: a new crossing
+    perturbed["count"] = 5  # a perturbed state that counts more keeps its count as the reference
+    assert not step(3) and tracker.count == 5 and len(tracker.crossings) == 4
+    assert not step(1) and tracker.count == 1 and tracker.restabilized[-1]["negative_eigenvalues"] == 1
+    assert len(switched) == 3

@@ -169,7 +169,11 @@ class OnsetTracker:
             self.stepper.restore(unstable)
             self.branch.switch(crossing)
             self.screen.screening = "exact"  # the minimizer's factors are shifted: no screening with them
-            self.count = self.screen.start()  # the perturbed state's count is the branch's reference
+            # the branch's reference count: the perturbed state's, but never below the crossing's unstable end
+            # (an equilibrium with nneg negative eigenvalues). The perturbed state is no equilibrium: in contact
+            # the perturbation can open pairs and count fewer, and the same instability found again at the next
+            # converged state would be a new crossing at every step (docs/postbuckling.md)
+            self.count = max(self.screen.start(), nneg)
             return False
         self.count = max(self.count, nneg)
         self.stepper.restore(unstable)
