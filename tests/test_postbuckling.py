@@ -309,7 +309,7 @@ def test_a_converged_step_that_passes_through_the_penalty_is_cut_back(overshoots
     to time.dt_min overshoots too does it end, with status contact and the penalty's message."""
     from app.onset.contact import OVERRUN, Limit, ModelLimits
 
-    seen = {"checks": 0, "reported": [], "dts": []}
+    seen = {"checks": 0, "reported": []}
 
     def check(self, array):
         seen["checks"] += 1
