@@ -20,7 +20,7 @@ from conftest import long_physics, run_to_end
 from mpi4py import MPI
 
 from app import config
-from app.model.contact import GAP_LIMIT, SelfContact, _gap_derivatives
+from app.model.contact import GAP_LIMIT, SelfContact, _crossing_segments, _gap_derivatives
 
 
 def test_the_gap_and_the_penalty_have_their_finite_difference_derivatives():
@@ -58,6 +58,61 @@ def test_the_gap_and_the_penalty_have_their_finite_difference_derivatives():
     assert np.abs(fdH - H).max() < 1e-5 * np.abs(H).max()
     # the reference state touches nothing (the arms face each other at a distance)
     assert pen.energy(np.zeros_like(X)) == 0.0
+
+
+def test_segment_crossings_are_those_of_a_check_of_every_pair():
+    """The sweep over bounding boxes finds the crossings that testing every pair of segments finds."""
+    rng = np.random.default_rng(5)
+
+    def every_pair(x, segs):
+        out = []
+        for A in range(len(segs)):
+            for B in range(A + 1, len(segs)):
+                if set(segs[A]) & set(segs[B]):
+                    continue
+                (p, q), (r, s) = x[segs[A]], x[segs[B]]
+                da, db, w = q - p, s - r, r - p
+                den = da[0] * db[1] - da[1] * db[0]
+                if den != 0:
+                    a, b = (w[0] * db[1] - w[1] * db[0]) / den, (w[0] * da[1] - w[1] * da[0]) / den
+                    if 0 < a < 1 and 0 < b < 1:
+                        out.append((A, B))
+        return out
+
+    total = 0
+    for _ in range(20):
+        x = np.cumsum(rng.normal(size=(50, 2)), axis=0)  # a random walk: a crumpled closed polyline
+        segs = np.array([(i, i + 1) for i in range(49)] + [(49, 0)])
+        want = every_pair(x, segs)
+        assert sorted(map(tuple, _crossing_segments(x, segs).tolist())) == want
+        total += len(want)
+    assert total > 100
+
+
+def test_a_node_pushed_through_beyond_the_penalty_reach_is_outside_the_domain():
+    """Two facing faces, one node of the upper pushed down through the lower: the penalty's energy rises,
+    and beyond the pairing's reach, where no node of either face is paired any more, it drops to zero. The
+    objective (the minimizer's) is the energy while a pair holds the crossing and inf beyond: it never
+    decreases along the push, so no line search can tunnel a node through the surface."""
+    n = 11
+    lower = np.stack([np.linspace(1.0, 0.0, n), np.zeros(n)], axis=1)  # right normals up: the body below
+    upper = np.stack([np.linspace(0.0, 1.0, n), np.full(n, 0.1)], axis=1)  # right normals down
+    X = np.vstack([lower, upper])
+    segs = np.array([(i, i + 1) for i in range(n - 1)] + [(n + i, n + i + 1) for i in range(n - 1)])
+    pen = SelfContact(X, segs, stiffness=1000.0)
+    energies, objectives = [], []
+    for depth in np.linspace(0.0, 0.3, 61):
+        u = np.zeros_like(X)
+        u[n + 5, 1] = -0.1 - depth  # the upper face's middle node, `depth` below the lower face
+        energies.append(pen.energy(u))
+        objectives.append(pen.objective(u))
+    energies, objectives = np.array(energies), np.array(objectives)
+    assert energies[0] == 0.0 and energies.max() > 0.0
+    assert energies[-1] == 0.0  # the penalty alone lets go: a tunnelled node costs nothing
+    assert np.all(objectives[1:] >= objectives[:-1])
+    held = np.isfinite(objectives)
+    assert np.array_equal(objectives[held], energies[held]) and not held[-1]
+    assert np.array_equal(held, np.cumprod(held).astype(bool))  # once outside, outside for good along the push
 
 
 def slit_block(path: str, half: bool, L=0.5, H=0.3, d=0.15, nx=10, ny_low=6, ny_up=8) -> None:

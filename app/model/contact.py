@@ -23,6 +23,7 @@ contact zones are short against the diffusion length, so the flux boundary condi
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,6 +70,37 @@ def _gap_derivatives(p: np.ndarray, a: np.ndarray, b: np.ndarray):
     return g, grad, M.T @ H @ M
 
 
+def _crossing_segments(x: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """The pairs (A, B), A < B, of segments (m, 2) of node indices, with no node in common, that cross at
+    node positions ``x`` (n, 2): inside both (a node touching a segment is in contact, not through it;
+    collinear overlaps do not count: a slit's two faces lie on each other in the reference). Candidates by their bounding boxes (sorted along x, each segment against those
+    whose x range starts within its own), then the exact test: O(m log m) for a surface of short segments."""
+    m = len(segments)
+    p, q = x[segments[:, 0]], x[segments[:, 1]]
+    lo, hi = np.minimum(p, q), np.maximum(p, q)
+    order = np.argsort(lo[:, 0], kind="stable")
+    end = np.searchsorted(lo[order, 0], hi[order, 0], side="right")
+    start = np.arange(1, m + 1)
+    counts = np.maximum(end - start, 0)
+    first = np.repeat(np.arange(m), counts)
+    offset = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+    A, B = order[first], order[start[first] + offset]
+    ea, eb = segments[A], segments[B]
+    ok = (lo[A, 1] <= hi[B, 1]) & (lo[B, 1] <= hi[A, 1]) & (ea[:, 0] != eb[:, 0]) & (ea[:, 0] != eb[:, 1]) \
+        & (ea[:, 1] != eb[:, 0]) & (ea[:, 1] != eb[:, 1])
+    A, B = A[ok], B[ok]
+    da, db, r = q[A] - p[A], q[B] - p[B], p[B] - p[A]
+
+    def cross(v, w):
+        return v[:, 0] * w[:, 1] - v[:, 1] * w[:, 0]
+
+    den = cross(da, db)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s, t = cross(r, db) / den, cross(r, da) / den  # along A, along B
+    hit = (den != 0) & (s > 0) & (s < 1) & (t > 0) & (t < 1)
+    return np.sort(np.stack([A[hit], B[hit]], axis=1), axis=1)
+
+
 class SelfContact:
     """The penalty on a surface of ``n`` nodes with reference positions ``X`` (n, 2) and segments
     ``segments`` (m, 2) of node indices, each ordered so that its right-hand normal points out of the
@@ -96,6 +128,10 @@ class SelfContact:
         own[self.segments[:, 1], np.arange(len(self.segments))] = True
         self.partners = ~own & (facing >= -1e-9 * self.seg_length[None, :])
         self.k = np.full(len(self.X), self.stiffness)
+        # each segment's neighbourhood (itself and the segments it shares a node with), for tunnelled_crossings
+        ends = self.segments
+        self._near = (ends[:, None, 0] == ends[None, :, 0]) | (ends[:, None, 0] == ends[None, :, 1]) \
+            | (ends[:, None, 1] == ends[None, :, 0]) | (ends[:, None, 1] == ends[None, :, 1])
 
     def pairs(self, u: np.ndarray) -> ContactState:
         """The active pairs of displacement ``u`` (n, 2): each node with the segment it has passed through
@@ -128,6 +164,39 @@ class SelfContact:
 
     def energy(self, u: np.ndarray) -> float:
         return self.pairs(u).energy
+
+    def objective(self, u: np.ndarray) -> float:
+        """The energy at ``u``, or inf where a node has tunnelled through the surface
+        (:meth:`tunnelled_crossings`)."""
+        state = self.pairs(u)
+        return math.inf if len(self.tunnelled_crossings(u, state)) else state.energy
+
+    def tunnelled_crossings(self, u: np.ndarray, state: ContactState | None = None) -> np.ndarray:
+        """The pairs (A, B) (k, 2) of surface segments that cross each other at displacement ``u`` where a node
+        has tunnelled: an end node of A that faced B in the reference and now lies in B's projection range
+        at least the pairing's reach (``reach`` x B's length) behind it, or the same with A and B exchanged.
+        There the node's penalty has dropped to zero at once (kappa mu / 2 (reach L)^2), although the surface
+        has passed through itself: such a state is outside the domain of the term. The penalty's own small
+        overlaps, within the reach, are not (``state`` is not needed: the rule reads positions only)."""
+        x = self.X + u
+        found = _crossing_segments(x, self.segments)
+        if not len(found):
+            return found
+
+        def tunnelled(A: int, B: int) -> bool:
+            """Whether an end node of A lies in B's range, the reach or more behind it."""
+            a, b = x[self.segments[B]]
+            t = b - a
+            L = float(np.linalg.norm(t))
+            for i in self.segments[A]:
+                d = x[i] - a
+                s, g = (d @ t) / L**2, (t[0] * d[1] - t[1] * d[0]) / L * -1.0
+                if self.partners[i, B] and -OVERLAP <= s <= 1.0 + OVERLAP and g <= -self.reach * self.seg_length[B]:
+                    return True
+            return False
+
+        keep = [k for k, (A, B) in enumerate(found) if tunnelled(A, B) or tunnelled(B, A)]
+        return found[keep]
 
     def derivatives(self, u: np.ndarray, hessian: bool = True):
         """(energy, gradient (n, 2), Hessian entries (rows, cols, values) in the flattened node-component
@@ -290,6 +359,22 @@ class SurfaceContact:
 
     def energy(self, owned_values) -> float:
         return self.penalty.energy(self.displacement(owned_values))
+
+    def objective(self, owned_values) -> float:
+        """The term's energy, or inf outside its domain: where a node has tunnelled through the surface
+        beyond the pairing's reach (:meth:`SelfContact.tunnelled_crossings`). The minimizer's line search
+        then shortens the step; the penalty alone, which falls to zero beyond the reach, would let a step
+        tunnel a node through the surface and call it a decrease of the energy."""
+        return self.penalty.objective(self.displacement(owned_values))
+
+    def tunnelled_crossing(self, owned_values) -> tuple[float, float] | None:
+        """The reference midpoint of the first segment of a crossing with a tunnelled node, or None."""
+        found = self.penalty.tunnelled_crossings(self.displacement(owned_values))
+        if not len(found):
+            return None
+        pen = self.penalty
+        mid = 0.5 * (pen.X[pen.segments[found[0, 0], 0]] + pen.X[pen.segments[found[0, 0], 1]])
+        return float(mid[0]), float(mid[1])
 
     def traction(self, owned_values) -> np.ndarray:
         """The contact traction (n, 2) [MPa] on each surface node: the penalty's force on the node over its

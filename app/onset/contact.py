@@ -129,8 +129,10 @@ def contact_summary(problem, rows: list[dict]) -> dict:
 
 
 def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
-    """With self-contact on: a state whose surface crosses itself where the penalty holds no pair (a node
-    pushed through beyond the pairing's reach), or penetrates deeper than GAP_LIMIT of its element."""
+    """With self-contact on: a state whose surface crosses itself where a node was pushed through beyond the
+    pairing's reach (the same rule as the minimizer's objective,
+    :meth:`app.model.contact.SurfaceContact.objective`), or penetrates deeper than GAP_LIMIT of its
+    element."""
     c = problem.contact
     state = c.state(array)
     pen = c.penalty
@@ -142,15 +144,12 @@ def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
             return Limit("contact", where, f"the contact penalty is overrun near ({where[0]:.4g}, {where[1]:.4g}) mm:"
                                            f" penetration {depth[k]:.3g} of the element (limit {GAP_LIMIT:g}); raise "
                                            "stability.contact_stiffness")
-    crossing = surface_contact(problem, array)
-    if crossing is None:
+    where = c.tunnelled_crossing(array)  # the penalty's own overlaps in contact, within its reach, are not
+    if where is None:
         return None
-    held = pen.X[np.unique(np.concatenate([state.nodes, pen.segments[state.segments].reshape(-1)]))] \
-        if len(state.nodes) else np.empty((0, 2))
-    if len(held) and np.min(np.linalg.norm(held - np.asarray(crossing.where), axis=1)) <= 2 * pen.seg_length.max():
-        return None  # the penalty's own small overlap where the surface is in contact
-    return Limit("contact", crossing.where, crossing.detail + ", where the contact penalty holds no pair (the "
-                 "surface passed through itself in one step: a shorter step or a stiffer penalty)", OVERRUN,
+    return Limit("contact", where, f"the surface passes through itself near the reference point "
+                                   f"({where[0]:.4g}, {where[1]:.4g}) mm, beyond the contact penalty's reach (a "
+                                   "node tunnelled in one step: a shorter step or a stiffer penalty)", OVERRUN,
                  overshoot=True)
 
 
@@ -202,8 +201,8 @@ class ModelLimits:
 
     def accepted(self, array: np.ndarray, t: float, retry: bool = False) -> Limit | None:
         """The checks of a converged step's state ``array`` (its displacement dofs): None, it is accepted;
-        ModelLimit if it reaches a limit. With self-contact, a surface that crossed itself where the penalty
-        holds no pair is the step's overshoot, not yet the branch's end: the pairing follows every Newton
+        ModelLimit if it reaches a limit. With self-contact, a surface through which a node tunnelled beyond the
+        penalty's reach is the step's overshoot, not yet the branch's end: the pairing follows every Newton
         iterate but reaches only ``REACH`` segment lengths through the surface, and a node that one iterate
         carries farther is missed. With ``retry`` (a shorter step is left) that limit is returned and the
         stepper cuts the step back; without, it ends the run."""

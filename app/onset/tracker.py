@@ -100,6 +100,9 @@ class OnsetTracker:
 
             self.branch = BranchSwitcher(problem, stepper, settings.rule, settings.imperfection,
                                          reference_length or typical_cell_size(problem), log=self.log)
+            # a saddle that the minimizer's line search cannot leave is left like a crossing: a step of the
+            # imperfection's size along a direction of negative curvature (app.solvers.minimizer)
+            stepper.escape_length = abs(settings.imperfection) * self.branch.length
 
     def start(self, rec) -> None:
         """The initial state's exact count, recorded with it."""
@@ -241,7 +244,7 @@ class OnsetTracker:
             "switches": [w.as_dict() for w in self.branch.switches],
             "branch_crossings": [x.as_dict() for x in self.crossings[1:]],
             "restabilized": list(self.restabilized),
-            "minimizer": {k: solver.get(k, 0) for k in ("shifted_factorizations", "saddles", "polishes")}
+            "minimizer": {k: solver.get(k, 0) for k in ("shifted_factorizations", "saddles", "polishes", "escapes")}
             | {"energy_rejections": st.energy_rejections}}}
 
     def criterion_summary(self) -> dict:

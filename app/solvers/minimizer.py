@@ -29,6 +29,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from app import compat, timing
@@ -38,6 +39,8 @@ SHIFT_START = 1e-6  # first trial shift (times |diag K|) of a factorization with
 SHIFT_MAX = 1e6  # beyond this the direction is a scaled gradient step already
 OUTSIDE = 1e300  # the objective outside Pi's domain (see MinimizingNewton._objective)
 ITERATION_FACTOR = 4  # escaping a saddle may take more iterations than an ordinary step
+ESCAPES = 3  # negative-curvature steps per solve (MinimizingNewton._escape)
+INVERSE_ITERATIONS = 30  # inverse iterations with the shifted factor for a direction of negative curvature
 
 
 @dataclass
@@ -49,6 +52,7 @@ class MinimizerVerdict:
     energy_end: float = float("nan")  # Pi at the solution
     shifted: int = 0  # factorizations with a shift in this solve
     polished: bool = False  # the energy line search gave way to plain Newton near the minimizer
+    escapes: int = 0  # negative-curvature steps taken in this solve
 
 
 class MinimizingNewton(NewtonSolver):
@@ -66,19 +70,27 @@ class MinimizingNewton(NewtonSolver):
         self.shifted_factorizations = 0
         self.saddles = 0  # solves that converged with negative pivots left
         self.polishes = 0
-        self._diag = None
+        self.escapes = 0  # negative-curvature steps (all solves)
+        # how far a negative-curvature step moves the farthest node [mm]: the branch's imperfection (set by
+        # the stepper); None: no such steps
+        self.escape_length: float | None = None
+        self.u_dofs = np.asarray(fields["u"]) if fields else None
+        self._shift = (0.0, None)  # (sigma, D) of the last factorization: its matrix is K + sigma D
 
     # --- SNES callbacks ------------------------------------------------------------------------
 
     def _objective(self, snes, x):
-        """Pi at the iterate. With a contact term, outside Pi's domain (a cell with det F <= 0, where ln J is
-        not defined: NaN) a value far above any energy of the step, so that the backtracking line search
-        shortens the step (PETSc's line search gives up at once on a NaN objective, and the step is cut
-        back: the behaviour without contact, kept as it was)."""
+        """Pi at the iterate. With a contact term, outside Pi's domain a value far above any energy of the
+        step, so that the backtracking line search shortens the step: where a cell has det F <= 0 (ln J is
+        not defined: NaN) and where the surface has passed through itself beyond the penalty's reach
+        (``extra.objective``: inf). Without contact PETSc's line search gives up at once on a NaN objective,
+        and the step is cut back: that behaviour is kept as it was."""
         with timing.timed("assembly"):
             self._sync_solution(x)
-            value = self.energy(x.array_r)
-            return value if math.isfinite(value) or self.extra is None else OUTSIDE
+            if self.extra is None:
+                return self.energy(x.array_r)
+            value = compat.assemble_scalar(self.energy_form, self.comm) + self.extra.objective(x.array_r)
+            return value if math.isfinite(value) else OUTSIDE
 
     def energy(self, owned_values=None) -> float:
         """Pi at ``w`` (or at the owned values given, already in ``w``): the energy form plus the extra
@@ -100,6 +112,9 @@ class MinimizingNewton(NewtonSolver):
         ksp.setOperators(J, P)
         nneg = self._factor_negatives(ksp)
         self.last.negatives = nneg
+        if self._shift[1] is not None:
+            self._shift[1].destroy()
+        self._shift = (0.0, None)
         if nneg == 0:
             self.sigma = 0.0
             return
@@ -123,7 +138,7 @@ class MinimizingNewton(NewtonSolver):
                 sigma *= 10.0
         finally:
             step.destroy()
-            d.destroy()
+        self._shift = (applied, d)
         self.sigma = sigma
 
     def _converged(self, snes, it, norms):
@@ -152,11 +167,82 @@ class MinimizingNewton(NewtonSolver):
             # the roundoff-update rule fired on a step the line search had shrunk (the energy's roundoff
             # hides the decrease near the minimizer): the iterate is short of the tolerance, finish it
             res = self._polish(res)
+        while (not res.converged and res.reason == reason.DIVERGED_LINE_SEARCH and self.last.negatives
+               and self.last.escapes < ESCAPES and self._escape()):
+            # a saddle the line search cannot leave: its residual is mostly in stiff directions and the
+            # energy along K_sigma^-1 R falls below roundoff, while K is indefinite. A step along a direction
+            # of negative curvature leaves it; then Newton again from there
+            its = res.iterations
+            self._sync_solution(self.x)
+            res = super().solve()
+            res = dataclasses.replace(res, iterations=res.iterations + its)
+            self.last_iterations = res.iterations
+            if not res.converged and res.reason == reason.DIVERGED_LINE_SEARCH:
+                res = self._polish(res)
         if res.converged:
             self.last.energy_end = self.energy()
             if self.last.negatives:
                 self.saddles += 1
         return res
+
+    def _escape(self) -> bool:
+        """One step from the last iterate along a direction of negative curvature of K, downhill: x += a v
+        with the farthest node moved by ``escape_length``, halved (at most 4 times) until the energy falls by
+        more than its roundoff. v comes from inverse iteration with the shifted factor (K + sigma D is
+        positive definite, its smallest eigenvalue in the D metric is K's most negative one plus sigma), from
+        a fixed random start; any v with v' K v < 0 will do. False (x unchanged) if there is no such step."""
+        if self.escape_length is None or self.u_dofs is None:
+            return False
+        snes, x, A = self.snes, self.x, self.A
+        ksp = snes.getKSP()
+        self._sync_solution(x)  # the forms read w: the line search may have left a trial point there
+        self._jacobian(snes, x, A, A)  # K at this iterate, shifted until positive definite
+        sigma, D = self._shift
+        if not self.last.negatives or D is None:
+            return False
+        n_owned = x.getLocalSize()
+        u_owned = self.u_dofs[self.u_dofs < n_owned]
+        v, w, Av = x.duplicate(), x.duplicate(), x.duplicate()
+        trial = x.duplicate()
+        try:
+            rng = PETSc.Random().create(self.comm)
+            rng.setSeed(20261204)
+            v.setRandom(rng)
+            rng.destroy()
+            v.array[self._bc_dofs] = 0.0
+            for _ in range(INVERSE_ITERATIONS):
+                w.pointwiseMult(D, v)
+                ksp.solve(w, v)
+                v.array[self._bc_dofs] = 0.0
+                v.scale(1.0 / v.norm())
+            A.mult(v, Av)
+            w.pointwiseMult(D, v)
+            curvature = v.dot(Av) - sigma * v.dot(w)  # v' K v
+            if not curvature < 0.0:
+                return False
+            self._residual(snes, x, w)
+            if w.dot(v) > 0.0:
+                v.scale(-1.0)  # downhill (the energy's gradient is the residual)
+            local = float(np.max(np.abs(v.array[u_owned]))) if u_owned.size else 0.0
+            vmax = self.comm.allreduce(local, op=MPI.MAX)
+            if not vmax > 0.0:
+                return False
+            e0 = self._objective(snes, x)
+            step = self.escape_length / vmax
+            for _ in range(5):
+                trial.waxpy(step, v, x)
+                e = self._objective(snes, trial)
+                if e < e0 - 1e-12 * max(1.0, abs(e0)):
+                    trial.copy(x)
+                    self.last.escapes += 1
+                    self.escapes += 1
+                    return True
+                step /= 2.0
+            self._sync_solution(x)
+            return False
+        finally:
+            for vec in (v, w, Av, trial):
+                vec.destroy()
 
     def _polish(self, failed: NewtonResult) -> NewtonResult:
         """A line search that failed or stalled close to a minimizer (residual below sqrt(rtol) x the
@@ -200,15 +286,21 @@ class MinimizingNewton(NewtonSolver):
         self.last_iterations = failed.iterations + its
         return NewtonResult(converged, failed.iterations + its, int(reason), float(fnorm))
 
+    def destroy(self) -> None:
+        if self._shift[1] is not None:
+            self._shift[1].destroy()
+        super().destroy()
+
     def counters(self) -> dict:
         return {**super().counters(), "sigma": self.sigma, "shifted_factorizations": self.shifted_factorizations,
-                "saddles": self.saddles, "polishes": self.polishes}
+                "saddles": self.saddles, "polishes": self.polishes, "escapes": self.escapes}
 
     def set_counters(self, c: dict) -> None:
         super().set_counters(c)
         self.sigma = c.get("sigma", 0.0)
         self.shifted_factorizations = c.get("shifted_factorizations", 0)
         self.saddles, self.polishes = c.get("saddles", 0), c.get("polishes", 0)
+        self.escapes = c.get("escapes", 0)
 
 
 def energy_decreased(verdict: MinimizerVerdict) -> bool:

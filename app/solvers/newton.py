@@ -97,7 +97,9 @@ class NewtonSolver:
     ``extra`` is a term of the energy that is not a form (the surface's self-contact,
     :class:`app.model.contact.SurfaceContact`): ``extra.terms(owned_values)`` gives its energy and gradient
     in global dof numbers, ``extra.entry_blocks(owned_values)`` its Hessian as blocks on its entries,
-    ``extra.global_entries`` their global dofs; the same on every rank. Each rank adds the rows it owns,
+    ``extra.global_entries`` their global dofs, ``extra.energy(owned_values)`` its energy and
+    ``extra.objective(owned_values)`` the same or inf outside its domain (the minimizer's line search,
+    :mod:`app.solvers.minimizer`); the same on every rank. Each rank adds the rows it owns,
     outside the Dirichlet dofs (whose rows and columns stay those of the conditions; :func:`add_blocks`).
     Its Hessian couples surface dofs that no cell couples: the matrix takes new nonzeros where contact
     begins.

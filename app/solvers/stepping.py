@@ -192,6 +192,7 @@ class TimeStepper:
         self._volume0 = None
         self.uptake_rate = float("nan")  # the last relative uptake rate at_equilibrium computed
         self.minimizing = False  # past an onset with stability.after_onset = "branch": follow_minimizers
+        self.escape_length = None  # the minimizer's negative-curvature step [mm] (the branch's imperfection)
         self.energy_rejections = 0  # minimizer solves whose energy ended above the initial guess's
         self._limits_of = limits
         self.limits = None  # built once minimizing
@@ -206,7 +207,8 @@ class TimeStepper:
 
         s, old = self.system, self.solver
         self.solver = MinimizingNewton(s.energy, s.residual, s.hessian, s.bcs, s.w, self._solver_settings, s.comm,
-                                       extra=s.extra)
+                                       fields={"u": s.u_dofs, "q": s.q_dofs}, extra=s.extra)
+        self.solver.escape_length = self.escape_length
         self.solver.set_counters(old.counters())
         old.destroy()
         self.minimizing = True
