@@ -17,7 +17,7 @@ import pytest
 from conftest import read_json, write_on_rank0
 from mpi4py import MPI
 
-from app import config
+from app import compat, config
 from app.factory import layer_materials
 from app.model.theory import film_wrinkling_wavelength
 from app.onset.contact import _segments_cross
@@ -178,6 +178,40 @@ def test_branch_steps_end_at_the_newton_tolerance(monkeypatch, tmp_path):
     for res, r0, rtol, scale in accepted:
         floor = 1e3 * np.finfo(float).eps * scale
         assert res.residual_norm <= max(rtol * r0, atol, floor), (res, r0)
+
+
+def test_a_stalled_line_search_at_a_saddle_is_left_along_negative_curvature(branch_runs, monkeypatch, tmp_path):
+    """The first minimizer solve after the switch is made to stall where it starts, as a line search does
+    whose energy changes fall below roundoff (the state past the onset: K has a negative pivot). The solver
+    must leave it by its negative-curvature step, not fail: the step is accepted at once (no failed solve
+    more than the run without the stall), and the branch is the same (the amplitudes at the end agree to
+    Newton's tolerance, the energy falls along it)."""
+    from petsc4py import PETSc
+
+    from app.solvers.minimizer import MinimizingNewton
+    from app.solvers.newton import NewtonResult, NewtonSolver
+
+    plain = NewtonSolver.solve
+    stalls = []
+
+    def stalled(self):
+        if isinstance(self, MinimizingNewton) and not stalls:
+            compat.function_vector(self.w).copy(self.x)
+            self._jacobian(self.snes, self.x, self.A, self.A)  # the start's inertia, as SNES would read it
+            stalls.append(self.last.negatives)
+            return NewtonResult(False, 1, int(PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH), float("nan"))
+        return plain(self)
+
+    monkeypatch.setattr(NewtonSolver, "solve", stalled)
+    comm = MPI.COMM_WORLD
+    s = simulate(_compression(), Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None)) / "stall", comm)
+    ref, ref_rows = branch_runs["plus"]
+    assert stalls == [1]  # the stalled start has K's one negative pivot
+    assert s["status"] == "buckled"
+    assert s["postbuckling"]["minimizer"]["escapes"] >= 1
+    assert s["failed_solves"] == ref["failed_solves"]
+    assert abs(s["final"]["amplitude_mm"]) == pytest.approx(abs(ref["final"]["amplitude_mm"]), rel=1e-6)
+    assert abs(ref["final"]["amplitude_mm"]) > 0.1 * FILM
 
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run with a serial one")
