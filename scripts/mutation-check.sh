@@ -149,7 +149,7 @@ MUTATIONS = [
      r"            start\.copy\(self\.x\)\n", "",
      ["tests/test_reuse.py::test_a_failed_reuse_is_repeated_with_plain_newton"]),
     ("the contact objective lets a node tunnel beyond the penalty's reach", "app/model/contact.py",
-     r"return math\.inf if len\(self\.tunnelled_crossings\(u, state\)\) else state\.energy", "return state.energy",
+     r"return math\.inf if len\(self\.tunnelled_crossings\(u\)\) else self\.energy\(u\)", "return self.energy(u)",
      ["tests/test_contact.py::test_a_node_pushed_through_beyond_the_penalty_reach_is_outside_the_domain"]),
     ("the minimizer's negative-curvature step goes uphill", "app/solvers/minimizer.py",
      r"            if w\.dot\(v\) > 0\.0:", "            if w.dot(v) < 0.0:",

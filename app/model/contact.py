@@ -128,10 +128,6 @@ class SelfContact:
         own[self.segments[:, 1], np.arange(len(self.segments))] = True
         self.partners = ~own & (facing >= -1e-9 * self.seg_length[None, :])
         self.k = np.full(len(self.X), self.stiffness)
-        # each segment's neighbourhood (itself and the segments it shares a node with), for tunnelled_crossings
-        ends = self.segments
-        self._near = (ends[:, None, 0] == ends[None, :, 0]) | (ends[:, None, 0] == ends[None, :, 1]) \
-            | (ends[:, None, 1] == ends[None, :, 0]) | (ends[:, None, 1] == ends[None, :, 1])
 
     def pairs(self, u: np.ndarray) -> ContactState:
         """The active pairs of displacement ``u`` (n, 2): each node with the segment it has passed through
@@ -168,16 +164,15 @@ class SelfContact:
     def objective(self, u: np.ndarray) -> float:
         """The energy at ``u``, or inf where a node has tunnelled through the surface
         (:meth:`tunnelled_crossings`)."""
-        state = self.pairs(u)
-        return math.inf if len(self.tunnelled_crossings(u, state)) else state.energy
+        return math.inf if len(self.tunnelled_crossings(u)) else self.energy(u)
 
-    def tunnelled_crossings(self, u: np.ndarray, state: ContactState | None = None) -> np.ndarray:
+    def tunnelled_crossings(self, u: np.ndarray) -> np.ndarray:
         """The pairs (A, B) (k, 2) of surface segments that cross each other at displacement ``u`` where a node
         has tunnelled: an end node of A that faced B in the reference and now lies in B's projection range
         at least the pairing's reach (``reach`` x B's length) behind it, or the same with A and B exchanged.
         There the node's penalty has dropped to zero at once (kappa mu / 2 (reach L)^2), although the surface
         has passed through itself: such a state is outside the domain of the term. The penalty's own small
-        overlaps, within the reach, are not (``state`` is not needed: the rule reads positions only)."""
+        overlaps, within the reach, are not (the rule reads positions only, no pairing)."""
         x = self.X + u
         found = _crossing_segments(x, self.segments)
         if not len(found):
