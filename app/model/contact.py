@@ -73,8 +73,9 @@ def _gap_derivatives(p: np.ndarray, a: np.ndarray, b: np.ndarray):
 def _crossing_segments(x: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """The pairs (A, B), A < B, of segments (m, 2) of node indices, with no node in common, that cross at
     node positions ``x`` (n, 2): inside both (a node touching a segment is in contact, not through it;
-    collinear overlaps do not count: a slit's two faces lie on each other in the reference). Candidates by their bounding boxes (sorted along x, each segment against those
-    whose x range starts within its own), then the exact test: O(m log m) for a surface of short segments."""
+    collinear overlaps do not count: a slit's two faces lie on each other in the reference). Candidates by
+    their bounding boxes (sorted along x, each segment against those whose x range starts within its own),
+    then the exact test: O(m log m) for a surface of short segments."""
     m = len(segments)
     p, q = x[segments[:, 0]], x[segments[:, 1]]
     lo, hi = np.minimum(p, q), np.maximum(p, q)
@@ -185,7 +186,7 @@ class SelfContact:
             L = float(np.linalg.norm(t))
             for i in self.segments[A]:
                 d = x[i] - a
-                s, g = (d @ t) / L**2, (t[0] * d[1] - t[1] * d[0]) / L * -1.0
+                s, g = (d @ t) / L**2, (t[1] * d[0] - t[0] * d[1]) / L  # g: along B's outward normal
                 if self.partners[i, B] and -OVERLAP <= s <= 1.0 + OVERLAP and g <= -self.reach * self.seg_length[B]:
                     return True
             return False
