@@ -2,7 +2,9 @@
 quadrilaterals, graded by a gmsh size field from ``tip_size`` around the top left corner (the crease's tip
 and walls, within ``tip_radius``) to ``element_size``, the element size growing by ``grading`` times the
 distance beyond that radius (a crease's strain field decays over a few crease lengths: the grading, not the
-far field's element size, decides how well it is resolved), and no coarser than ``film_size`` in the film. The same physical groups as the structured bilayer: cells film, substrate; facets top,
+far field's element size, decides how well it is resolved), and no coarser than ``film_size`` in the film.
+With ``tip_depth`` > 0 the fine zone is the band within ``tip_radius`` of the left edge from the top down to
+that depth (a crease that grows along its symmetry line: its walls and its tip wherever it ends). The same physical groups as the structured bilayer: cells film, substrate; facets top,
 bottom, left, right.
 
 :func:`add_model` builds the mesh in the current gmsh model (pure gmsh; see :mod:`meshes`).
@@ -20,12 +22,14 @@ _NEW_NAMES = tuple(int(v) for v in gmsh.__version__.split(".")[:2]) >= (4, 10)
 GRADING = 0.25  # the element size's growth per unit distance from the fine zone
 
 _OPTION = {"points": "PointsList" if _NEW_NAMES else "NodesList", "in": "InField" if _NEW_NAMES else "IField",
-           "min": "SizeMin" if _NEW_NAMES else "LcMin", "max": "SizeMax" if _NEW_NAMES else "LcMax"}
+           "min": "SizeMin" if _NEW_NAMES else "LcMin", "max": "SizeMax" if _NEW_NAMES else "LcMax",
+           "curves": "CurvesList" if _NEW_NAMES else "EdgesList",
+           "sampling": "Sampling" if _NEW_NAMES else "NumPointsPerCurve"}
 
 
 def add_model(length: float, substrate_thickness: float, film_thickness: float, element_size: float,
               tip_size: float, tip_radius: float, film_size: float | None = None,
-              grading: float = GRADING) -> tuple[dict, dict, dict]:
+              grading: float = GRADING, tip_depth: float = 0.0) -> tuple[dict, dict, dict]:
     """Mesh the bilayer [0, L] x [0, H + w] in the current gmsh model: (cell groups, facet groups, info)."""
     L, H, w = length, substrate_thickness, film_thickness
     geo = gmsh.model.geo
@@ -39,14 +43,27 @@ def add_model(length: float, substrate_thickness: float, film_thickness: float, 
     geo.synchronize()
 
     field = gmsh.model.mesh.field
-    distance = field.add("Distance")
-    field.setNumbers(distance, _OPTION["points"], [p[5]])
-    tip = field.add("Threshold")
-    field.setNumber(tip, _OPTION["in"], distance)
-    field.setNumber(tip, _OPTION["min"], tip_size)
-    field.setNumber(tip, _OPTION["max"], element_size)
-    field.setNumber(tip, "DistMin", tip_radius)
-    field.setNumber(tip, "DistMax", tip_radius + max(element_size - tip_size, 0.0) / grading)
+
+    def graded(distance: int, radius: float) -> int:
+        """tip_size within ``radius`` of the distance field's entities, growing by ``grading`` beyond it."""
+        size = field.add("Threshold")
+        field.setNumber(size, _OPTION["in"], distance)
+        field.setNumber(size, _OPTION["min"], tip_size)
+        field.setNumber(size, _OPTION["max"], element_size)
+        field.setNumber(size, "DistMin", radius)
+        field.setNumber(size, "DistMax", radius + max(element_size - tip_size, 0.0) / grading)
+        return size
+
+    corner = field.add("Distance")
+    field.setNumbers(corner, _OPTION["points"], [p[5]])
+    tip = graded(corner, tip_radius + tip_depth)
+    if tip_depth > 0:  # fine where near the left edge and within tip_depth (+ radius) of the top
+        edge = field.add("Distance")
+        field.setNumbers(edge, _OPTION["curves"], [left_f, left_s])
+        field.setNumber(edge, _OPTION["sampling"], int((H + w) / tip_size) + 2)
+        band = field.add("Max")
+        field.setNumbers(band, "FieldsList", [tip, graded(edge, tip_radius)])
+        tip = band
     sizes = [tip]
     if film_size is not None and film_size < element_size:
         box = field.add("Box")
@@ -71,4 +88,5 @@ def add_model(length: float, substrate_thickness: float, film_thickness: float, 
     gmsh.model.mesh.generate(2)
     types, tags, _ = gmsh.model.mesh.getElements(2)
     cells = {gmsh.model.mesh.getElementProperties(t)[0]: len(e) for t, e in zip(types, tags)}
-    return dict(CELLS), dict(FACETS), {"tip_size": tip_size, "tip_radius": tip_radius, "cells_by_type": cells}
+    return dict(CELLS), dict(FACETS), {"tip_size": tip_size, "tip_radius": tip_radius, "tip_depth": tip_depth,
+                                       "cells_by_type": cells}

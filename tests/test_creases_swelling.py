@@ -118,9 +118,10 @@ def test_a_swelling_layer_creases_undrained_at_hong_zhao_suos_stretch(shared_tmp
     # the quasi-static run's onset is an equilibrium state (measured 0.52% below, the ramp's lag)
     eq = s["creases"]["wrinkling_equilibrium"]
     assert eq["growth_mm"] == pytest.approx(eq["equilibrium_growth_mm"], rel=0.01) and workflow.quasi_static(eq)
-    assert [lv["resolution"] for lv in s["creases"]["levels"]] == [4, 8, 16]
-    assert all(lv["growth_mm"] == pytest.approx(onset["growth_mm"], rel=0.03) for lv in s["creases"]["levels"])
-    for tr in s["creases"]["levels"][-1]["trials"]:
+    levels = [lv for lv in s["creases"]["levels"] if not lv.get("pilot")]  # a growing crease's pilot level aside
+    assert [lv["resolution"] for lv in levels] == [4, 8, 16]
+    assert all(lv["growth_mm"] == pytest.approx(onset["growth_mm"], rel=0.03) for lv in levels)
+    for tr in levels[-1]["trials"]:
         if "growth_mm" in tr:
             assert 1.0 + tr["growth_mm"] / H == pytest.approx(theory.constrained_layer_stretch(mat, tr["mu_bar"]),
                                                              rel=1e-8)  # measured 4e-9: Newton's tolerance

@@ -167,7 +167,8 @@ class GeometryKind:
     #: a trial crease (stability.creases, app.onset.creases) can be placed: crease_setup and crease_line
     creases: ClassVar[bool] = False
 
-    def crease_setup(self, cfg: dict, comm, tip_size: float, tip_radius: float) -> GeometrySetup:
+    def crease_setup(self, cfg: dict, comm, tip_size: float, tip_radius: float,
+                     tip_depth: float = 0.0) -> GeometrySetup:
         """The geometry meshed for a trial crease on a symmetry line of the body (:attr:`creases`)."""
         raise NotImplementedError
 

@@ -48,16 +48,18 @@ class Bilayer(GeometryKind):
                          film_grading=mesh["film_grading"], msh_path=msh_path)
         return self._setup(tm, geo)
 
-    def crease_setup(self, cfg: dict, comm, tip_size: float, tip_radius: float) -> GeometrySetup:
+    def crease_setup(self, cfg: dict, comm, tip_size: float, tip_radius: float,
+                     tip_depth: float = 0.0) -> GeometrySetup:
         """The bilayer meshed for a trial crease at its left edge (a symmetry line: u_x = 0), graded from
-        ``tip_size`` within ``tip_radius`` of the top left corner (:mod:`meshes.crease`)."""
+        ``tip_size`` within ``tip_radius`` of the top left corner, or of the left edge down to ``tip_depth``
+        (a growing crease; :mod:`meshes.crease`)."""
         from app.geometry.tagged import mesh_from_builder
         from meshes import crease
 
         geo, mesh = cfg["geometry"], cfg["mesh"]
         tm = mesh_from_builder(comm, "crease", crease.add_model, geo["length"], geo["substrate_thickness"],
                                geo["film_thickness"], mesh["element_size"], tip_size, tip_radius,
-                               geo["film_thickness"] / mesh["film_layers"])
+                               geo["film_thickness"] / mesh["film_layers"], tip_depth=tip_depth)
         return self._setup(tm, geo)
 
     def crease_line(self, cfg: dict) -> float:

@@ -58,7 +58,7 @@ PROFILE_MEMBERS = {"growth_mm": "profile_growth", "time": "profile_time", "posit
 # the trial crease (stability.creases and its parameters) is computed after the run on a mesh of its own.
 FREE_KEYS = ("output", "time.end", "time.max_steps", "stability.error_estimate", "stability.surface_check", "reduced",
              "stability.creases", "stability.crease_size", "stability.crease_resolution",
-             "stability.crease_fluid")
+             "stability.crease_fluid", "stability.crease_growth")
 
 
 class CheckpointError(config.ConfigError):

@@ -18,6 +18,14 @@
   one keeps the flat state's content in every cell (c held): the crease then forms faster than fluid
   can follow, and the difference of G is the difference of the stored energy.
 
+With ``mirror = (line, stiffness)`` both add the trial crease's contact with its mirror image: the surface may
+touch the symmetry line x = line but not cross it,
+
+    E_m = int_surface stiffness / 2 <line - x>_+^2 dA,   x = X + u_x,
+
+(``stiffness`` per unit area: kappa mu / h, as the surface's self-contact). It is zero, with its gradient
+and Hessian, on every state on the line's side, so the flat state is the same with it.
+
 Both give the trial the same handles: ``w`` (the unknown), ``energy``, ``residual``, ``hessian`` (compiled
 forms), ``bcs`` (the fixed displacements), ``displacement`` (the x and y sub-spaces the crease's
 condition acts on), ``set_load(t)``, ``value()`` (the energy of ``w``), ``growth()``, and ``kept`` with
@@ -34,19 +42,40 @@ from app import compat
 from app.model.kinematics import deformation_gradient
 from app.model.operators import displacement_in_problem_space
 
+MIRROR_QUADRATURE = 2  # Gauss points per surface facet of the mirror term (exact for a linear penetration)
+
+
+def mirror_term(problem, u, mirror):
+    """The mirror contact's energy (UFL) on the permeable surface; 0 for ``mirror = None``."""
+    if mirror is None:
+        return None
+    line, stiffness = mirror
+    x = ufl.SpatialCoordinate(problem.domain)[0] + u[0]
+    ds = problem.ds_permeable(metadata={"quadrature_degree": MIRROR_QUADRATURE})
+    return 0.5 * stiffness * ufl.max_value(line - x, 0.0) ** 2 * ds
+
 
 class FrozenFluid:
     """The problem's own unknown and forms; the energy is the stored energy of the state in ``w``."""
 
     fluid = "frozen"
 
-    def __init__(self, problem):
+    def __init__(self, problem, mirror=None):
         if problem.diffusion:
             raise ValueError("a frozen-fluid state needs a loading without fluid motion (loading.kind = compression)")
         p = self.problem = problem
         self.w, self.bcs = p.w, p.bcs
-        self.energy, self.residual, self.hessian = p.forms.energy, p.forms.residual, p.forms.hessian
         self.displacement = p.W.sub(0)
+        self._mirror = None
+        if mirror is None:
+            self.energy, self.residual, self.hessian = p.forms.energy, p.forms.residual, p.forms.hessian
+            return
+        term = mirror_term(p, ufl.split(p.w)[0], mirror)
+        residual = p.pot.residual + ufl.derivative(term, p.w, ufl.TestFunction(p.W))
+        hessian = ufl.derivative(residual, p.w, ufl.TrialFunction(p.W))
+        self.energy, self.residual, self.hessian = (compat.form(p.pot.energy + term), compat.form(residual),
+                                                    compat.form(hessian))
+        self._mirror = compat.form(term)
 
     def set_load(self, t: float) -> None:
         self.problem.set_time(t, 1.0)
@@ -54,7 +83,8 @@ class FrozenFluid:
     def value(self) -> float:
         p = self.problem
         p.state.x.array[:] = p.w.x.array  # no fluid moves: Q stays 0, the state is w
-        return p.stored_energy()
+        mirror = 0.0 if self._mirror is None else compat.assemble_scalar(self._mirror, p.comm)
+        return p.stored_energy() + mirror
 
     def growth(self) -> float:
         p = self.problem
@@ -72,7 +102,7 @@ class DrainedEquilibrium:
     ``fluid``: "drained" (c free in every state) or "undrained" (a state reached from the flat one keeps its
     content)."""
 
-    def __init__(self, problem, fluid: str = "drained"):
+    def __init__(self, problem, fluid: str = "drained", mirror=None):
         if not problem.diffusion or problem.surface_measure is None:
             raise ValueError("a drained equilibrium needs a loading whose bath reaches the body through a "
                              "permeable surface (loading.kind = swelling)")
@@ -86,6 +116,8 @@ class DrainedEquilibrium:
         u, c = ufl.split(self.w)
         bulk, constraint = p.mat.law.free_energy(deformation_gradient(u), p.mat.s0 + c, p.mat)
         G = (bulk - self.mu_bar * c) * p.dx + constraint * p.dx_coupling
+        if mirror is not None:
+            G = G + mirror_term(p, u, mirror)
         v, dv = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
         residual = ufl.derivative(G, self.w, v)
         self.energy, self.residual = compat.form(G), compat.form(residual)
@@ -117,6 +149,9 @@ class DrainedEquilibrium:
             self._content.x.array[:] = flat[self._c_dofs]
 
 
-def equilibrium(problem, fluid: str = "drained"):
-    """The equilibrium states of a problem's loading: frozen fluid when no fluid moves, else the bath's."""
-    return FrozenFluid(problem) if not problem.diffusion else DrainedEquilibrium(problem, fluid)
+def equilibrium(problem, fluid: str = "drained", mirror=None):
+    """The equilibrium states of a problem's loading: frozen fluid when no fluid moves, else the bath's;
+    ``mirror``: (line, stiffness) of the trial crease's contact with its mirror image, or None."""
+    if not problem.diffusion:
+        return FrozenFluid(problem, mirror)
+    return DrainedEquilibrium(problem, fluid, mirror)

@@ -80,10 +80,12 @@ class CreaseTrial:
     free (``fluid = "drained"``) or held at the flat state's (``"undrained"``): :mod:`app.model.equilibrium`."""
 
     def __init__(self, problem, length: float, settings: SolverSettings, substeps: int = 20, line: float = 0.0,
-                 fluid: str = "drained"):
+                 fluid: str = "drained", mirror_stiffness: float | None = None):
         p = self.problem = problem
-        sys = self.system = equilibrium(p, fluid)
+        self.grows = mirror_stiffness is not None
+        sys = self.system = equilibrium(p, fluid, (line, mirror_stiffness) if self.grows else None)
         self.length, self.line, self.substeps = length, line, substeps
+        self._creased = {}  # growing: the creased states with less energy than the flat one, by load time
         fdim = p.domain.topology.dim - 1
         surface = p.facets_of(p.geo.facets_with_role("permeable"))
         mid = compat.facet_midpoints(p.domain, surface.astype(np.int32))
@@ -150,14 +152,61 @@ class CreaseTrial:
         return self._growth
 
     def trial(self, t: float) -> Trial:
-        """The flat and creased states at load time t and their energies."""
+        """The flat and creased states at load time t and their energies. A growing crease is followed down
+        in load from the nearest load above t whose creased state had less energy than the flat one, if there
+        is one (:meth:`_follow`); otherwise, and if that fails, it is closed from the flat state."""
         p, sys = self.problem, self.system
         flat = self.flat_state(t)
         strain = p.loading.applied_strain(t)
+        sys.keep(self._flat)
+        above = [tk for tk in self._creased if tk > t]
+        taken = self._follow(min(above), t) if above else None
+        if taken is None:
+            taken = self._close(t)
+        w = sys.w.x.array
+        creased = sys.value()
+        penetration, depth = self._shape(w, self._flat)
+        if self.grows and creased < flat:
+            self._creased[t] = w.copy()
+        w[:] = self._flat
+        return Trial(t, strain, flat, creased, penetration, depth, taken, p.loading.mu_bar(t), self._growth)
+
+    def _follow(self, start: float, t: float) -> int | None:
+        """The creased state at load t followed from the one at load ``start`` (the crease's points held on
+        the line, the load stepped like the flat state's, a step that fails halved): the number of load
+        steps, or None if it failed (the flat state left in ``w``)."""
+        sys, lo = self.system, self.problem.loading
+        w = sys.w.x.array
+        steps = max(1, int(np.ceil(abs(lo.applied_strain(t) - lo.applied_strain(start)) / FLAT_STRAIN_STEP)))
+        targets = list(np.linspace(start, t, steps + 1)[1:])
+        w[:] = self._creased[start]
+        self.target.x.array[:] = self.line - self._X  # the crease's points on the line
+        done, halvings, taken = start, 0, 0
+        while targets:
+            tk = float(targets[0])
+            before = w.copy()
+            sys.set_load(tk)  # undrained: the content held is the flat state's at t (kept by trial())
+            res = self.crease_solver.solve()
+            if res.converged:
+                done = targets.pop(0)
+                taken += 1
+                continue
+            w[:] = before
+            halvings += 1
+            if halvings > FLAT_HALVINGS:
+                w[:] = self._flat
+                sys.set_load(t)
+                return None
+            targets.insert(0, 0.5 * (done + tk))
+        sys.set_load(t)
+        return taken
+
+    def _close(self, t: float) -> int:
+        """Close the trial crease from the flat state in ``w`` in sub-steps: the number taken."""
+        sys = self.system
         X = self._X
         w = sys.w.x.array
         flat_x = w[self._x_dofs]  # the flat state's u_x (the crease's points start from it)
-        sys.keep(self._flat)
         s, ds, taken = 0.0, 1.0 / self.substeps, 0
         while s < 1.0:
             step = min(ds, 1.0 - s)
@@ -176,10 +225,7 @@ class CreaseTrial:
                 raise CreaseFailed(f"the trial crease did not close at t = {t:.6g} s ({self._load(t)}): "
                                    f"{s:.3f} of its motion done, the minimizing Newton failed with sub-steps of "
                                    f"{2 * ds:.2g} (SNES reason {res.reason})")
-        creased = sys.value()
-        penetration, depth = self._shape(w, self._flat)
-        w[:] = self._flat
-        return Trial(t, strain, flat, creased, penetration, depth, taken, p.loading.mu_bar(t), self._growth)
+        return taken
 
     def _load(self, t: float) -> str:
         lo = self.problem.loading

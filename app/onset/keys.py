@@ -29,6 +29,10 @@ STABILITY: dict[str, Key] = {
     "creases": key(bool, False, None, "also find the energetic crease onset (docs/creases.md)"),
     "crease_size": key(float, 0.05, in_open(0.0, 0.5), "the trial crease's length / the body's thickness"),
     "crease_resolution": key(int, 32, in_closed(8, 256), "elements along the trial crease (finest of 3 meshes)"),
+    "crease_growth": key(bool, True, None,
+                         "the free surface beyond the trial crease may fold onto the symmetry line (contact with "
+                         "its mirror image, stiffness contact_stiffness) and the crease grow to its size of least "
+                         "energy, followed down in load to its onset; false: held at its size (docs/creases.md)"),
     "crease_fluid": key(str, "drained", one_of("drained", "undrained"),
                         "under swelling: the creased state's fluid follows the bath (drained) or keeps the flat "
                         "state's content (undrained); without fluid motion it has no effect"),

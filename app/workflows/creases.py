@@ -31,6 +31,8 @@ SNAP = 2.0  # a bracket whose negative end's crease is this many times deeper (o
 MARCH = 0.03  # a finer level brackets its onset from the coarser one's in steps of this fraction of it
 LEVEL_RATIO = 2  # crease_resolution halves from one level to the next coarser one
 TIP_RADIUS = 1.5  # the finest elements reach this many crease lengths around the tip
+GROWN = 1.0  # a growing crease deeper than this many fine zones at its onset on the coarsest level ...
+GROWN_MARGIN = 1.25  # ... has every level meshed again, fine along the symmetry line to this many times its depth
 EQUILIBRIUM = 0.02  # under swelling, a wrinkling onset whose growth is this close to the equilibrium one at its
 # time (relative) was reached quasi-statically: only then do the trial's equilibrium states decide which is first
 
@@ -65,14 +67,19 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
     resolutions = [finest // LEVEL_RATIO ** k for k in (2, 1, 0)]
     settings = SolverSettings.from_config(cfg)
     fluid = cfg["stability"]["crease_fluid"]
-    levels, found, swelling, wrinkling = [], None, False, None
-    for resolution in resolutions:
-        setup = kind.crease_setup(cfg, comm, c / resolution, TIP_RADIUS * c)
+    grows = cfg["stability"]["crease_growth"]
+    levels, found, swelling, wrinkling, depth = [], None, False, None, 0.0
+    queue = list(resolutions)
+    while queue:
+        resolution = queue.pop(0)
+        setup = kind.crease_setup(cfg, comm, c / resolution, TIP_RADIUS * c, depth)
         problem = factory.problem(cfg, comm, setup=setup)
-        trial = CreaseTrial(problem, c, settings, line=kind.crease_line(cfg), fluid=fluid)
-        swelling = trial.system.fluid != "frozen"
         surface = problem.materials[setup.material_under("permeable", comm)]
         mu = getattr(surface, config.law(cfg).stiffness)  # the energies are reported per mu c^2
+        # a growing crease: the mirror contact's stiffness per area, kappa mu / h at the tip's elements
+        mirror = cfg["stability"]["contact_stiffness"] * mu * resolution / c if grows else None
+        trial = CreaseTrial(problem, c, settings, line=kind.crease_line(cfg), fluid=fluid, mirror_stiffness=mirror)
+        swelling = trial.system.fluid != "frozen"
         try:
             if swelling and critical is not None and wrinkling is None:
                 at = min(critical["time"], problem.loading.load_end())
@@ -80,34 +87,51 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
             level = _level(trial, found, problem.loading.load_end(), mu * c * c, log)
         finally:
             trial.destroy()
-        level.update(resolution=resolution, tip_size_mm=c / resolution, cells=problem.cells())
-        levels.append(level)
-        log(f"creases: {resolution} elements along the trial crease ({problem.cells()} cells): "
+        level.update(resolution=resolution, tip_size_mm=c / resolution, tip_depth_mm=depth, cells=problem.cells())
+        log(f"creases: {resolution} elements along the trial crease ({problem.cells()} cells"
+            + (f", fine to a depth of {depth:.4g} mm" if depth else "") + "): "
             + (f"onset at t = {level['time']:.6g} s ({_load(level, swelling)})"
                if level["time"] is not None else "no onset up to time.end"))
         found = level["time"]
         if found is None:
+            levels.append(level)
             break
+        grown = level.get("depth_mm", 0.0)
+        if not levels and not depth and grown > GROWN * TIP_RADIUS * c:
+            # the crease has grown out of its fine zone: every level again, fine along the line to past it
+            depth = GROWN_MARGIN * grown
+            log(f"creases: the crease grew to a depth of {grown:.4g} mm at its onset, beyond the fine zone "
+                f"({TIP_RADIUS * c:.4g} mm): every level again, fine along the symmetry line to {depth:.4g} mm")
+            pilot = {**level, "pilot": True}
+            queue = list(resolutions)
+            continue
+        levels.append(level)
+    if depth:
+        levels.insert(0, pilot)
     onset = None
     if found is not None:
-        times = [lv["time"] for lv in levels]
-        snap = any(lv.get("snap") for lv in levels)
+        levels_used = [lv for lv in levels if not lv.get("pilot")]
+        times = [lv["time"] for lv in levels_used]
+        snap = any(lv.get("snap") for lv in levels_used)
         rich = _extrapolated(times, snap)
         t, err = rich["converged"], rich["errors"][-1]
         onset = {"time": t, "time_error": err, "order": rich["order"], "position_mm": [kind.crease_line(cfg), _top(cfg)]}
         if snap:
             onset["snap"] = True
         if swelling:  # each level's flat growth at its onset, extrapolated like the times
-            growth = _extrapolated([lv["growth_mm"] for lv in levels], snap)
+            growth = _extrapolated([lv["growth_mm"] for lv in levels_used], snap)
             mu_bar = problem.loading.mu_bar
             onset.update(growth_mm=growth["converged"], growth_error=growth["errors"][-1], mu_bar=mu_bar(t),
                          mu_bar_error=abs(mu_bar(t + err) - mu_bar(t)), fluid=fluid)
         else:
-            strain_rate = levels[-1]["applied_strain"] / levels[-1]["time"]  # the compression ramp is linear in t
+            last = levels_used[-1]
+            strain_rate = last["applied_strain"] / last["time"]  # the compression ramp is linear in t
             onset.update(applied_strain=strain_rate * t, applied_strain_error=abs(strain_rate) * err)
     extra = {"wrinkling_equilibrium": wrinkling} if wrinkling is not None else {}
-    return {"onset": onset, "crease_size_mm": c, "levels": levels, **extra,
-            "method": "trial crease of fixed size on the symmetry line (Hong, Zhao & Suo 2009)"
+    return {"onset": onset, "crease_size_mm": c, "levels": levels, "growth": grows, "tip_depth_mm": depth, **extra,
+            "method": ("trial crease on the symmetry line, growing in contact with its mirror image to its size of "
+                       "least energy, followed down in load" if grows else
+                       "trial crease of fixed size on the symmetry line") + " (Hong, Zhao & Suo 2009)"
                       + (f"; states in equilibrium with the bath, grand potentials compared ({fluid})"
                          if swelling else ""),
             "penetration_mm": max((e["penetration_mm"] for lv in levels for e in lv["trials"]
@@ -174,6 +198,8 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
             t = 0.5 * (a + b)
             ft = difference(t)
             (a, fa), (b, fb) = ((t, ft), (b, fb)) if ft > 0 else ((a, fa), (t, ft))
+        if trial.grows and math.isfinite(fb):
+            (a, fa), (b, fb) = _on_the_grown_branch(difference, ((a, fa), (b, fb)), guess, end)
         side, ga, gb = None, fa, fb  # g: Illinois' weights (halved on a retained end); f: the true values
         for _ in range(FALSI_STEPS):
             if b - a <= TOLERANCE * b:
@@ -194,10 +220,12 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
                     ga *= 0.5
                 side = "b"
         time = a - fa * (b - a) / (fb - fa) if math.isfinite(fb) else 0.5 * (a + b)
-        snap = _snapped(trials, a, b)
+        snap = _snapped(trials, a, b, trial.grows)
     loading = trial.problem.loading
     level = {"time": time, "applied_strain": loading.applied_strain(time) if time is not None else None,
              "trials": trials}
+    if bracket is not None and math.isfinite(fb):  # the crease of least energy at the onset: its depth
+        level["depth_mm"] = next(tr["depth_mm"] for tr in trials if tr["time"] == b)
     if snap:
         level["snap"] = True
         log(f"  the trial crease snaps at t = {time:.6g} s to a fold far deeper than itself (or cannot be held) "
@@ -209,13 +237,32 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
     return level
 
 
-def _snapped(trials: list, a: float, b: float) -> bool:
+def _on_the_grown_branch(difference, bracket, guess: float | None, end: float):
+    """A growing crease's bracket with both ends on the branch of the crease found at its negative end: the
+    positive end was closed from the flat state before that crease was known, and may be a smaller crease
+    with more energy (the two coexist near the onset). Evaluated again it is followed down from the
+    negative end (:meth:`CreaseTrial.trial`); while that is still negative, the bracket moves down."""
+    (a, _), (b, fb) = bracket
+    step = MARCH * guess if guess is not None else end / SCAN_POINTS
+    while True:
+        fa = difference(a)
+        if fa > 0:
+            return (a, fa), (b, fb)
+        b, fb = a, fa
+        a -= step
+        if a < end * 1e-3:
+            raise CreaseFailed("the grown crease has less energy than the flat state at every load tried, down to "
+                               f"t = {end * 1e-3:.3g} s: no onset to bracket")
+
+
+def _snapped(trials: list, a: float, b: float, grows: bool) -> bool:
     """Whether the final bracket [a, b] ends in a snap rather than a sign change of one crease's energy: at b
-    the trial failed, or its crease is SNAP times deeper than at a (the free surface beyond the trial
-    crease has folded onto the line: a larger crease)."""
+    the trial failed, or, for a crease held at its size, its crease is SNAP times deeper than at a (the free
+    surface beyond the trial crease has folded onto the line, through it: a larger crease). A growing crease
+    (``stability.crease_growth``) is that larger crease, followed down to its own sign change."""
     at = {tr["time"]: tr for tr in trials}
     ta, tb = at[a], at[b]
-    return "failed" in tb or tb["depth_mm"] > SNAP * ta["depth_mm"]
+    return "failed" in tb or (not grows and tb["depth_mm"] > SNAP * ta["depth_mm"])
 
 
 def _bracket(difference, guess: float | None, end: float):

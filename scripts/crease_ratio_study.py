@@ -1,0 +1,60 @@
+"""Creases or wrinkles first in a compressed bilayer, over the film/substrate modulus ratio (docs/creases.md).
+
+For each ratio, runs ``hydrobuckle run configs/bilayer-creases.toml --set material.film.modulus_ratio=R``
+(any further ``--set`` is passed on) into OUTDIR/ratio-R and prints one table row from its summary.json:
+the crease onset strain with its error bar, the depth of the crease at the onset, the linear (wrinkling)
+onset of the run and of the exact 1D reduction, and which comes first. A ratio whose run exists already
+(its summary.json) is read, not run again.
+
+    python scripts/crease_ratio_study.py OUTDIR [R ...] [--set KEY=VALUE ...]
+    (default ratios: 1 1.5 2 2.5 3 4 5; each run is serial, about 5-10 minutes)
+"""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+CONFIG = Path(__file__).resolve().parent.parent / "configs" / "bilayer-creases.toml"
+RATIOS = ["1", "1.5", "2", "2.5", "3", "4", "5"]
+
+
+def row(ratio: str, s: dict) -> str:
+    cr = s.get("creases", {})
+    onset, strain = cr.get("onset"), s["config"]["loading"]["compression_strain"]
+    crease = (f"{onset['applied_strain']:.4f} +- {onset['applied_strain_error']:.4f}" if onset else
+              cr.get("error", "none up to time.end"))
+    depth = next((lv.get("depth_mm") for lv in reversed(cr.get("levels", [])) if lv.get("depth_mm")), None)
+    linear = s["critical"]["time"] * strain if s.get("critical") else None
+    red = s.get("reduced") or {}
+    exact = red.get("time") * strain if red.get("time") is not None else None
+    cols = [ratio, crease, f"{depth:.4f}" if depth else "-", f"{linear:.4f}" if linear else "-",
+            f"{exact:.4f}" if exact else "-", str(cr.get("first"))]
+    return "| " + " | ".join(cols) + " |"
+
+
+def main(argv: list[str]) -> int:
+    if not argv or argv[0].startswith("-"):
+        print(__doc__, file=sys.stderr)
+        return 2
+    outdir, rest = Path(argv[0]), argv[1:]
+    sets = rest[rest.index("--set"):] if "--set" in rest else []
+    ratios = [r for r in rest[: len(rest) - len(sets)]] or RATIOS
+    print("| modulus ratio | crease onset strain | crease depth at onset [mm] | wrinkling onset (2D) "
+          "| wrinkling onset (1D, exact) | first |")
+    print("|---|---|---|---|---|---|")
+    for ratio in ratios:
+        out = outdir / f"ratio-{ratio}"
+        if not (out / "summary.json").exists():
+            cmd = ["hydrobuckle", "run", str(CONFIG), "--set", f"material.film.modulus_ratio={ratio}", *sets,
+                   "-o", str(out)]
+            subprocess.run(cmd, check=False, stdout=subprocess.DEVNULL)
+        if not (out / "summary.json").exists():
+            print(f"| {ratio} | run failed: see {out} | | | | |")
+            continue
+        print(row(ratio, json.loads((out / "summary.json").read_text())), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
