@@ -15,6 +15,13 @@ scales as mu c^2 f(load) while c is small against the layer; it is positive at n
 the crease onset, independently of c (Hong, Zhao & Suo: nominal strain 0.354 for an incompressible
 neo-Hookean half-space in plane-strain compression; the linear, Biot onset is 0.456).
 
+A growing crease (``mirror_stiffness``: :func:`app.model.equilibrium.mirror_term`) lets the rest of the free
+surface fold onto the line too, in frictionless contact with its mirror image: the trial crease is then the
+smallest crease, and the body takes the size of least energy (a bilayer's is about twice its film). Once
+a load has a creased state below the flat one, a trial at a lower load follows that crease down in load
+instead of closing a new one from the flat state, so that the onset is the sign change along the branch of
+the crease of least energy, not of the small trial crease that coexists with it.
+
 The creased state is reached from the flat one by moving the crease's points to the symmetry line in
 sub-steps, each solved by the minimizing Newton (energy line search, inertia correction: the fold passes
 through states where K is indefinite); a sub-step that fails is halved. The load enters through the

@@ -39,8 +39,8 @@ STABILITY: dict[str, Key] = {
     "contact": key(bool, False, None, "self-contact of the traction-free surface as a penalty term: a followed "
                    "branch goes on past the fold into creases (docs/creases.md)"),
     "contact_stiffness": key(float, 1000.0, in_closed(10.0, 1.0e6),
-                             "the penalty's kappa: interface stiffness kappa mu / h (penetration ~ p / (kappa mu) "
-                             "of an element)"),
+                             "the penalty's kappa (self-contact; a growing trial crease's mirror): interface "
+                             "stiffness kappa mu / h (penetration ~ p / (kappa mu) of an element)"),
     "error_estimate": key(bool, True, None,
                           "estimate g_c's discretization error with two coarsened companion runs"),
 }
