@@ -115,7 +115,8 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
         snap = any(lv.get("snap") for lv in levels_used)
         rich = _extrapolated(times, snap)
         t, err = rich["converged"], rich["errors"][-1]
-        onset = {"time": t, "time_error": err, "order": rich["order"], "position_mm": [kind.crease_line(cfg), _top(cfg)]}
+        onset = {"time": t, "time_error": err, "order": rich["order"],
+                 "position_mm": [kind.crease_line(cfg), _top(cfg)]}
         if snap:
             onset["snap"] = True
         if swelling:  # each level's flat growth at its onset, extrapolated like the times
@@ -348,7 +349,8 @@ def describe(block: dict, critical: dict | None) -> str:
                        "these equilibrium states do not say which comes first (a quasi-static ramp would)")
     if onset is None:
         return line
-    measure, unit, scale, at = ("growth_mm", "um", 1e3, "a growth of") if "growth_mm" in onset else ("time", "s", 1.0, "t =")
+    measure, unit, scale, at = (("growth_mm", "um", 1e3, "a growth of") if "growth_mm" in onset
+                                else ("time", "s", 1.0, "t ="))
     if critical is None:
         return line + "; no wrinkling onset within the run: the crease comes first"
     where = f"the wrinkling onset at {at} {critical[measure] * scale:.5g} {unit}"
