@@ -157,6 +157,12 @@ MUTATIONS = [
     ("a stalled minimizer never leaves the saddle", "app/solvers/minimizer.py",
      r"and self\.last\.escapes < ESCAPES and self\._escape\(\)\)", "and False)",
      ["tests/test_postbuckling.py::test_a_stalled_line_search_at_a_saddle_is_left_along_negative_curvature"]),
+    ("a growing crease's mirror holds nothing", "app/model/equilibrium.py",
+     r"return 0\.5 \* stiffness \*", "return 0.5e-9 * stiffness *",
+     ["tests/test_creases.py::test_a_growing_crease_on_a_homogeneous_layer_has_the_held_creases_onset"]),
+    ("a growing crease is closed from the flat state at every load, never followed down", "app/onset/creases.py",
+     r"above = \[tk for tk in self\._creased if tk > t\]", "above = []",
+     ["tests/test_creases.py::test_a_growing_crease_in_a_bilayer_takes_a_size_of_its_own"]),
 ]
 
 
