@@ -7,7 +7,7 @@ onset of the run and of the exact 1D reduction, and which comes first. A ratio w
 (its summary.json) is read, not run again.
 
     python scripts/crease_ratio_study.py OUTDIR [R ...] [--set KEY=VALUE ...]
-    (default ratios: 1 1.5 2 2.5 3 4 5; each run is serial, about 5-10 minutes)
+    (default ratios: 1 1.5 2 2.5 3 3.5 4 5; each run is serial, about 3-8 minutes)
 """
 
 import json
@@ -16,18 +16,20 @@ import sys
 from pathlib import Path
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "bilayer-creases.toml"
-RATIOS = ["1", "1.5", "2", "2.5", "3", "4", "5"]
+RATIOS = ["1", "1.5", "2", "2.5", "3", "3.5", "4", "5"]
 
 
 def row(ratio: str, s: dict) -> str:
     cr = s.get("creases", {})
-    onset, strain = cr.get("onset"), s["config"]["loading"]["compression_strain"]
+    onset, cfg = cr.get("onset"), s["config"]
+    strain, end = cfg["loading"]["compression_strain"], cfg["time"]["end"]
     crease = (f"{onset['applied_strain']:.4f} +- {onset['applied_strain_error']:.4f}" if onset else
               cr.get("error", "none up to time.end"))
     depth = next((lv.get("depth_mm") for lv in reversed(cr.get("levels", [])) if lv.get("depth_mm")), None)
-    linear = s["critical"]["time"] * strain if s.get("critical") else None
+    linear = s["critical"]["applied_strain"] if s.get("critical") else None
     red = s.get("reduced") or {}
-    exact = red.get("time") * strain if red.get("time") is not None else None
+    # the compression ramp: applied strain = compression_strain * min(t / time.end, 1)
+    exact = strain * min(red["time"] / end, 1.0) if red.get("time") is not None else None
     cols = [ratio, crease, f"{depth:.4f}" if depth else "-", f"{linear:.4f}" if linear else "-",
             f"{exact:.4f}" if exact else "-", str(cr.get("first"))]
     return "| " + " | ".join(cols) + " |"
@@ -46,7 +48,7 @@ def main(argv: list[str]) -> int:
     for ratio in ratios:
         out = outdir / f"ratio-{ratio}"
         if not (out / "summary.json").exists():
-            cmd = ["hydrobuckle", "run", str(CONFIG), "--set", f"material.film.modulus_ratio={ratio}", *sets,
+            cmd = [sys.executable, "-m", "app", "run", str(CONFIG), "--set", f"material.film.modulus_ratio={ratio}", *sets,
                    "-o", str(out)]
             subprocess.run(cmd, check=False, stdout=subprocess.DEVNULL)
         if not (out / "summary.json").exists():

@@ -42,11 +42,12 @@ from app import compat
 from app.model.kinematics import deformation_gradient
 from app.model.operators import displacement_in_problem_space
 
-MIRROR_QUADRATURE = 2  # Gauss points per surface facet of the mirror term (exact for a linear penetration)
+MIRROR_QUADRATURE = 2  # quadrature degree of the mirror term on a surface facet (exact on a facet wholly past
+# the line, where the penetration is linear; approximate on one that the line cuts)
 
 
 def mirror_term(problem, u, mirror):
-    """The mirror contact's energy (UFL) on the permeable surface; 0 for ``mirror = None``."""
+    """The mirror contact's energy (UFL) on the permeable surface; None for ``mirror = None``."""
     if mirror is None:
         return None
     line, stiffness = mirror

@@ -1,5 +1,5 @@
 """The energetic crease onset (docs/creases.md): the load at which a creased surface has less energy than the
-flat one, by the trial crease of fixed size of Hong, Zhao & Suo (2009).
+flat one, by the trial crease of Hong, Zhao & Suo (2009), held at its size or growing from it.
 
 A crease is subcritical: the flat state stays linearly stable past it (the Hessian's inertia cannot see it),
 but a state folded into self-contact has lower energy. The trial crease sits on a symmetry line of the body
@@ -69,6 +69,7 @@ class Trial:
     substeps: int
     mu_bar: float = 0.0  # the bath's chemical potential at t [MPa]
     growth: float = 0.0  # the flat state's growth [mm]
+    followed: bool = False  # the creased state was followed down in load from a grown crease (not closed)
 
     @property
     def difference(self) -> float:
@@ -168,6 +169,7 @@ class CreaseTrial:
         sys.keep(self._flat)
         above = [tk for tk in self._creased if tk > t]
         taken = self._follow(min(above), t) if above else None
+        followed = taken is not None
         if taken is None:
             taken = self._close(t)
         w = sys.w.x.array
@@ -176,7 +178,8 @@ class CreaseTrial:
         if self.grows and creased < flat:
             self._creased[t] = w.copy()
         w[:] = self._flat
-        return Trial(t, strain, flat, creased, penetration, depth, taken, p.loading.mu_bar(t), self._growth)
+        return Trial(t, strain, flat, creased, penetration, depth, taken, p.loading.mu_bar(t), self._growth,
+                     followed)
 
     def _follow(self, start: float, t: float) -> int | None:
         """The creased state at load t followed from the one at load ``start`` (the crease's points held on
@@ -200,7 +203,9 @@ class CreaseTrial:
                 continue
             w[:] = before
             halvings += 1
-            if halvings > FLAT_HALVINGS:
+            # undrained, the content is held at the flat state's at t from the first step on: smaller load
+            # steps change nothing then
+            if halvings > FLAT_HALVINGS or sys.fluid == "undrained":
                 w[:] = self._flat
                 sys.set_load(t)
                 return None

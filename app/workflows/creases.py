@@ -4,8 +4,11 @@ The trial crease (:class:`app.onset.creases.CreaseTrial`) is computed on meshes 
 the crease's tip: three of them, with ``stability.crease_resolution`` / 4, / 2 and x 1 elements along the
 crease. On each, the load where the creased state's energy falls below the flat state's is bracketed and
 then found by regula falsi; the three onsets give the answer by Richardson extrapolation and its error bar.
-The coarsest level scans the whole run (time 0 to time.end, or to the end of a swelling ramp, after which the
-bath and so its equilibrium states no longer change); each finer one starts from the coarser answer.
+A growing crease (``stability.crease_growth``) that outgrows the fine zone on the coarsest level makes that
+level a pilot: the three levels are then meshed with a band of fine elements along the symmetry line, and
+the first of them marches from the pilot's onset. The coarsest level (the pilot, if there is one) scans the
+whole run (time 0 to time.end, or to the end of a swelling ramp, after which the bath and so its
+equilibrium states no longer change); each finer one starts from the coarser answer.
 
 Under compression the load is the applied strain (linear in time). Under swelling the states are the body's
 equilibria with the bath at mu_bar(t) (quasi-static swelling) and the load is reported as the flat state's
@@ -68,11 +71,12 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
     settings = SolverSettings.from_config(cfg)
     fluid = cfg["stability"]["crease_fluid"]
     grows = cfg["stability"]["crease_growth"]
-    levels, found, swelling, wrinkling, depth = [], None, False, None, 0.0
+    levels, found, swelling, wrinkling, depth, pilot = [], None, False, None, 0.0, None
     queue = list(resolutions)
     while queue:
         resolution = queue.pop(0)
-        setup = kind.crease_setup(cfg, comm, c / resolution, TIP_RADIUS * c, depth)
+        setup = (kind.crease_setup(cfg, comm, c / resolution, TIP_RADIUS * c, tip_depth=depth) if depth
+                 else kind.crease_setup(cfg, comm, c / resolution, TIP_RADIUS * c))
         problem = factory.problem(cfg, comm, setup=setup)
         surface = problem.materials[setup.material_under("permeable", comm)]
         mu = getattr(surface, config.law(cfg).stiffness)  # the energies are reported per mu c^2
@@ -97,7 +101,7 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
             levels.append(level)
             break
         grown = level.get("depth_mm", 0.0)
-        if not levels and not depth and grown > GROWN * TIP_RADIUS * c:
+        if grows and not levels and not depth and grown > GROWN * TIP_RADIUS * c:
             # the crease has grown out of its fine zone: every level again, fine along the line to past it
             depth = GROWN_MARGIN * grown
             log(f"creases: the crease grew to a depth of {grown:.4g} mm at its onset, beyond the fine zone "
@@ -177,7 +181,7 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
             return -math.inf
         entry = {"time": t, "applied_strain": tr.applied_strain, "difference": tr.difference,
                  "difference_per_mu_c2": tr.difference / scale, "penetration_mm": tr.penetration,
-                 "depth_mm": tr.depth, "substeps": tr.substeps}
+                 "depth_mm": tr.depth, "substeps": tr.substeps, "followed": tr.followed}
         if swelling:
             entry.update(mu_bar=tr.mu_bar, growth_mm=tr.growth)
         trials.append(entry)
@@ -199,10 +203,22 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
             t = 0.5 * (a + b)
             ft = difference(t)
             (a, fa), (b, fb) = ((t, ft), (b, fb)) if ft > 0 else ((a, fa), (t, ft))
-        if trial.grows and math.isfinite(fb):
-            (a, fa), (b, fb) = _on_the_grown_branch(difference, ((a, fa), (b, fb)), guess, end)
+        rechecked = set()
+
+        def on_branch(a, fa, b, fb):
+            """The bracket with its positive end on the grown crease's branch (:func:`_on_the_grown_branch`):
+            once, for an end closed from the flat state while a growing crease with less energy is known."""
+            if not (trial.grows and math.isfinite(fb)) or a in rechecked or _entry(trials, a).get("followed"):
+                return (a, fa), (b, fb)
+            (a, fa), (b, fb) = _on_the_grown_branch(difference, ((a, fa), (b, fb)), end)
+            rechecked.add(a)
+            return (a, fa), (b, fb)
+
         side, ga, gb = None, fa, fb  # g: Illinois' weights (halved on a retained end); f: the true values
         for _ in range(FALSI_STEPS):
+            (a2, fa2), (b2, fb2) = on_branch(a, fa, b, fb)
+            if (a2, b2) != (a, b):  # the bracket moved onto the branch: Illinois starts again
+                (a, fa), (b, fb), side, ga, gb = (a2, fa2), (b2, fb2), None, fa2, fb2
             if b - a <= TOLERANCE * b:
                 break
             if not math.isfinite(gb) or -gb > FAR * ga:  # the far end is far past the onset: halve instead
@@ -226,7 +242,7 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
     level = {"time": time, "applied_strain": loading.applied_strain(time) if time is not None else None,
              "trials": trials}
     if bracket is not None and math.isfinite(fb):  # the crease of least energy at the onset: its depth
-        level["depth_mm"] = next(tr["depth_mm"] for tr in trials if tr["time"] == b)
+        level["depth_mm"] = _entry(trials, b)["depth_mm"]
     if snap:
         level["snap"] = True
         log(f"  the trial crease snaps at t = {time:.6g} s to a fold far deeper than itself (or cannot be held) "
@@ -238,22 +254,28 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
     return level
 
 
-def _on_the_grown_branch(difference, bracket, guess: float | None, end: float):
+def _entry(trials: list, t: float) -> dict:
+    """The last trial at load t (a load may have been evaluated again on a grown crease's branch)."""
+    return next(tr for tr in reversed(trials) if tr["time"] == t)
+
+
+def _on_the_grown_branch(difference, bracket, end: float):
     """A growing crease's bracket with both ends on the branch of the crease found at its negative end: the
     positive end was closed from the flat state before that crease was known, and may be a smaller crease
     with more energy (the two coexist near the onset). Evaluated again it is followed down from the
-    negative end (:meth:`CreaseTrial.trial`); while that is still negative, the bracket moves down."""
+    negative end (:meth:`CreaseTrial.trial`); while that is still negative, the bracket moves down by its
+    width, doubled at every move, to at most end / 1000."""
     (a, _), (b, fb) = bracket
-    step = MARCH * guess if guess is not None else end / SCAN_POINTS
+    width, floor = b - a, end * 1e-3
     while True:
         fa = difference(a)
         if fa > 0:
             return (a, fa), (b, fb)
-        b, fb = a, fa
-        a -= step
-        if a < end * 1e-3:
+        if a <= floor:
             raise CreaseFailed("the grown crease has less energy than the flat state at every load tried, down to "
-                               f"t = {end * 1e-3:.3g} s: no onset to bracket")
+                               f"t = {floor:.3g} s: no onset to bracket")
+        b, fb = a, fa
+        a, width = max(floor, a - width), 2 * width
 
 
 def _snapped(trials: list, a: float, b: float, grows: bool) -> bool:
