@@ -4,8 +4,9 @@ and walls, within ``tip_radius``) to ``element_size``, the element size growing 
 distance beyond that radius (a crease's strain field decays over a few crease lengths: the grading, not the
 far field's element size, decides how well it is resolved), and no coarser than ``film_size`` in the film.
 With ``tip_depth`` > 0 the fine zone is the band within ``tip_radius`` of the left edge from the top down to
-``tip_depth`` + ``tip_radius`` (a crease that grows along its symmetry line: its walls and its tip wherever it ends). The same
-physical groups as the structured bilayer: cells film, substrate; facets top, bottom, left, right.
+``tip_depth`` + ``tip_radius`` (a crease that grows along its symmetry line: its walls and its tip wherever
+it ends). The same physical groups as the structured bilayer: cells film, substrate; facets top, bottom,
+left, right.
 
 :func:`add_model` builds the mesh in the current gmsh model (pure gmsh; see :mod:`meshes`).
 """

@@ -48,7 +48,8 @@ def main(argv: list[str]) -> int:
     for ratio in ratios:
         out = outdir / f"ratio-{ratio}"
         if not (out / "summary.json").exists():
-            cmd = [sys.executable, "-m", "app", "run", str(CONFIG), "--set", f"material.film.modulus_ratio={ratio}", *sets,
+            cmd = [sys.executable, "-m", "app", "run", str(CONFIG),
+                   "--set", f"material.film.modulus_ratio={ratio}", *sets,
                    "-o", str(out)]
             subprocess.run(cmd, check=False, stdout=subprocess.DEVNULL)
         if not (out / "summary.json").exists():
