@@ -124,30 +124,16 @@ class CreaseTrial:
         with frozen fluid from the last flat state, as the load goes; in equilibrium with a bath from the
         solved one at the nearest load at or below t, so always forwards in the load (a swelling gel's flat
         state is not reliably followed back down). Its energy."""
-        p, sys = self.problem, self.system
-        lo = p.loading
+        sys = self.system
         # frozen fluid: from the last flat state, up or down in the applied strain (a path-independent
         # elastic state); in equilibrium with a bath: forwards only
         start = self._last if sys.fluid == "frozen" else max(tk for tk in self._solved if tk <= t)
-        strain_change = abs(lo.applied_strain(t) - lo.applied_strain(start))
-        steps = max(1, int(np.ceil(strain_change / FLAT_STRAIN_STEP)))
         sys.w.x.array[:] = self._solved[start]
-        targets = list(np.linspace(start, t, steps + 1)[1:]) if t != start else []
-        done, halvings = start, 0
-        while targets:
-            tk = float(targets[0])
-            before = sys.w.x.array.copy()
-            sys.set_load(tk)
-            res = self.flat_solver.solve()
-            if res.converged:
-                done = targets.pop(0)
-                continue
-            sys.w.x.array[:] = before
-            halvings += 1
-            if halvings > FLAT_HALVINGS:
-                raise FlatFailed(f"the flat state did not converge at t = {tk:.6g} s (SNES reason {res.reason}, "
-                                 f"load steps halved {FLAT_HALVINGS} times from t = {done:.6g} s)")
-            targets.insert(0, 0.5 * (done + tk))
+        failed, _ = self._step_load(self.flat_solver, start, t, FLAT_HALVINGS)
+        if failed is not None:
+            tk, reason, done = failed
+            raise FlatFailed(f"the flat state did not converge at t = {tk:.6g} s (SNES reason {reason}, "
+                             f"load steps halved {FLAT_HALVINGS} times from t = {done:.6g} s)")
         sys.set_load(t)  # the load of the state in w (also when it was solved before)
         self._flat = self._solved[t] = sys.w.x.array.copy()
         self._last = t
@@ -185,33 +171,49 @@ class CreaseTrial:
         """The creased state at load t followed from the one at load ``start`` (the crease's points held on
         the line, the load stepped like the flat state's, a step that fails halved): the number of load
         steps, or None if it failed (the flat state left in ``w``)."""
-        sys, lo = self.system, self.problem.loading
+        sys = self.system
         w = sys.w.x.array
-        steps = max(1, int(np.ceil(abs(lo.applied_strain(t) - lo.applied_strain(start)) / FLAT_STRAIN_STEP)))
-        targets = list(np.linspace(start, t, steps + 1)[1:])
         w[:] = self._creased[start]
         self.target.x.array[:] = self.line - self._X  # the crease's points on the line
+        # undrained, the content is held at the flat state's at t (kept by trial()) from the first step on:
+        # smaller load steps change nothing then
+        halvings = 0 if sys.fluid == "undrained" else FLAT_HALVINGS
+        failed, taken = self._step_load(self.crease_solver, start, t, halvings)
+        sys.set_load(t)
+        if failed is not None:
+            w[:] = self._flat
+            return None
+        return taken
+
+    def _steps(self, start: float, t: float) -> int:
+        """Load steps from ``start`` to t: at most FLAT_STRAIN_STEP of applied strain each."""
+        lo = self.problem.loading
+        return max(1, int(np.ceil(abs(lo.applied_strain(t) - lo.applied_strain(start)) / FLAT_STRAIN_STEP)))
+
+    def _step_load(self, solver, start: float, t: float, max_halvings: int):
+        """Take the state in ``w`` (at load ``start``) to load t in :meth:`_steps` steps, each solved by
+        ``solver``; a step that fails is undone and halved, at most ``max_halvings`` times in all. Returns
+        (None when done, else (the load that failed, its SNES reason, the last load reached) with ``w`` at
+        that load; the number of steps that converged)."""
+        w = self.system.w.x.array
+        steps = self._steps(start, t)
+        targets = list(np.linspace(start, t, steps + 1)[1:]) if t != start else []
         done, halvings, taken = start, 0, 0
         while targets:
             tk = float(targets[0])
             before = w.copy()
-            sys.set_load(tk)  # undrained: the content held is the flat state's at t (kept by trial())
-            res = self.crease_solver.solve()
+            self.system.set_load(tk)
+            res = solver.solve()
             if res.converged:
                 done = targets.pop(0)
                 taken += 1
                 continue
             w[:] = before
             halvings += 1
-            # undrained, the content is held at the flat state's at t from the first step on: smaller load
-            # steps change nothing then
-            if halvings > FLAT_HALVINGS or sys.fluid == "undrained":
-                w[:] = self._flat
-                sys.set_load(t)
-                return None
+            if halvings > max_halvings:
+                return (tk, res.reason, done), taken
             targets.insert(0, 0.5 * (done + tk))
-        sys.set_load(t)
-        return taken
+        return None, taken
 
     def _close(self, t: float) -> int:
         """Close the trial crease from the flat state in ``w`` in sub-steps: the number taken."""
