@@ -207,6 +207,11 @@ def cell_geometry_nodes(domain) -> np.ndarray:
     return cells_by_row(domain.geometry.dofmap, num_local_cells(domain))
 
 
+def cell_dofs(V) -> np.ndarray:
+    """The local dofs of each local cell (owned + ghost) of a (collapsed) space: (num_cells, dofs per cell)."""
+    return cells_by_row(V.dofmap.list, num_local_cells(V.mesh))
+
+
 def num_local_cells(domain) -> int:
     """Cells on this rank, owned and ghost."""
     imap = domain.topology.index_map(domain.topology.dim)

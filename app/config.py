@@ -143,6 +143,11 @@ def _loadings():
     return loading.LOADINGS
 
 
+def loading_kind(cfg: dict):
+    """The loading class a config names (:data:`app.model.loading.LOADINGS`)."""
+    return _loadings().get(cfg["loading"]["kind"])
+
+
 def _loading_table() -> dict:
     """``kind`` and every registered loading's keys with their defaults (a loading reads its own)."""
     from app.model import loading
@@ -380,6 +385,13 @@ def validate(cfg: dict) -> None:
                           f"crease and a loading that moves no fluid or swells from a bath; allowed: geometry.kind = "
                           + " or ".join(repr(k.name) for k in _kinds() if k.creases)
                           + " with loading.kind = " + " or ".join(map(repr, able)))
+    if stab["creases"] and stab["crease_fluid"] == "transient" and not loading.fluid_frozen:
+        from app.reduced.section import reducible
+
+        why = reducible(cfg)
+        if why:
+            raise ConfigError("stability.crease_fluid", "= 'transient' takes the run's content from its exact 1D "
+                              f"transient, which this config does not have ({why}); allowed: 'drained', 'undrained'")
     if stab["imperfection"] == 0.0:
         raise ConfigError("stability.imperfection", "= 0 is out of range; allowed: [-1, 1] except 0 (the sign picks "
                           "the direction along the mode)")

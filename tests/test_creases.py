@@ -266,3 +266,29 @@ def test_a_flat_state_that_cannot_be_solved_ends_the_level_instead_of_counting_a
     with pytest.raises(FlatFailed, match="flat state did not converge"):
         workflow._level(fake, None, 1.0, 1.0, lambda msg: None)
     assert calls == [0.125]  # the first load of the scan, not a march downwards from it
+
+
+def test_a_scan_whose_flat_state_ends_is_narrowed_to_where_it_was_solved():
+    """A transient's flat state can end within the run (its surface past its own stability: the paper's
+    bilayer at ratio 2, t = 0.9907 s between scan points 0.75 and 1.0 s): the scan then looks again, once,
+    between its last positive load and the last load the flat state reached. An onset there is bracketed
+    and found (here the difference 0.52 - t, the flat state solved up to 0.53: 0.52 to the level's
+    tolerance); none there ends the level with FlatFailed, as before."""
+    from types import SimpleNamespace
+
+    def fake(root, limit):
+        def trial(t):
+            if t > limit:
+                raise FlatFailed(f"the flat state did not converge at t = {t:.6g} s (test)", limit)
+            return SimpleNamespace(difference=root - t, applied_strain=0.0, penetration=0.0, depth=1.0,
+                                   substeps=1, followed=False)
+
+        loading = SimpleNamespace(applied_strain=lambda t: 0.0)
+        return SimpleNamespace(trial=trial, grows=False, system=SimpleNamespace(fluid="frozen"),
+                               problem=SimpleNamespace(loading=loading))
+
+    level = workflow._level(fake(0.52, 0.53), None, 1.0, 1.0, lambda msg: None)
+    assert level["time"] == pytest.approx(0.52, rel=workflow.TOLERANCE)
+    assert all(tr["time"] <= 0.53 for tr in level["trials"])
+    with pytest.raises(FlatFailed):
+        workflow._level(fake(0.58, 0.55), None, 1.0, 1.0, lambda msg: None)

@@ -26,9 +26,10 @@ from test_creases import BLOCK
 from test_creases import _trial as crease_trial
 from test_creases import same_on_one_and_all_ranks
 
-from app import config, factory
+from app import config, factory, geometry
 from app.model import theory
 from app.onset.creases import CreaseTrial
+from app.solvers.newton import SolverSettings
 from app.workflows import creases as workflow
 from app.workflows.pipeline import run_case
 
@@ -142,3 +143,39 @@ def test_which_comes_first_is_left_open_for_a_wrinkling_onset_away_from_equilibr
     quasi_static = {"growth_mm": 0.0067, "equilibrium_growth_mm": 0.0067 * 1.01}
     assert workflow._first(onset, critical, quasi_static) == "wrinkle"  # 0.0067 < 0.5: by the growth
     assert workflow._first(onset, {"time": 0.95, "growth_mm": 0.6}, None) == "crease"
+
+
+def test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_statically_is_the_undrained_one(comm):
+    """stability.crease_fluid = "transient": both states hold, in every cell, the content the run's uniform
+    transient (the exact 1D reduction) has reached at t. On the quasi-static layer at t = 9700 s (stretch
+    2.29, 4 elements along the crease): the 2D flat state holding the 1D content has the 1D state's growth
+    (measured 7e-9 relative: the two are one state, solved by two methods); the ramp is slow, so the
+    transient state is the equilibrium one to its lag (growth 0.09% below) and the trial's energy difference
+    is the undrained trial's on the equilibrium state (measured 1e-6 relative). The content travels from
+    rank 0, and 1 and 2 ranks give the same energies (1e-8)."""
+    from mpi4py import MPI
+
+    cfg = layer("stability.creases=true", "stability.crease_fluid=transient")
+    profile = workflow._content_profile(cfg, comm, lambda msg: None)
+    t = 9700.0
+
+    def one(on, fluid):
+        kind = geometry.kind_of(cfg)
+        c = 0.05 * H
+        p = factory.problem(cfg, on, setup=kind.crease_setup(cfg, on, c / 4, 1.5 * c))
+        trial = CreaseTrial(p, c, SolverSettings.from_config(cfg), fluid=fluid,
+                            content=profile if fluid == "transient" else None)
+        try:
+            return trial.trial(t)
+        finally:
+            trial.destroy()
+
+    got = one(comm, "transient")
+    assert got.growth == pytest.approx(profile.growth_at(t), rel=1e-6)
+    eq = one(comm, "undrained")
+    assert got.growth < eq.growth and got.growth == pytest.approx(eq.growth, rel=2e-3)
+    assert got.difference == pytest.approx(eq.difference, rel=1e-5)
+    if comm.size > 1:
+        ref = one(MPI.COMM_SELF, "transient") if comm.rank == 0 else None
+        ref = comm.bcast(None if ref is None else (ref.flat_energy, ref.creased_energy), root=0)
+        assert (got.flat_energy, got.creased_energy) == pytest.approx(ref, rel=1e-8)

@@ -18,7 +18,13 @@
   one keeps the flat state's content in every cell (c held): the crease then forms faster than fluid
   can follow, and the difference of G is the difference of the stored energy.
 
-With ``mirror = (line, stiffness)`` both add the trial crease's contact with its mirror image: the surface may
+- :class:`HeldContent`: the body at the fluid content of a transient run's flat state, held in every cell at
+  every load time (``content(t, Y)``: a laterally uniform content field, from the exact 1D transient,
+  :class:`app.reduced.transient.ContentProfile`). The energy is the grand potential at that content, whose
+  difference between two states at one time is the difference of their stored energy: a crease that forms
+  faster than the fluid moves (undrained) on the state the run has reached, wherever its diffusion stands.
+
+With ``mirror = (line, stiffness)`` all three add the trial crease's contact with its mirror image: the surface may
 touch the symmetry line x = line but not cross it,
 
     E_m = int_surface stiffness / 2 <line - x>_+^2 dA,   x = X + u_x,
@@ -150,9 +156,62 @@ class DrainedEquilibrium:
             self._content.x.array[:] = flat[self._c_dofs]
 
 
-def equilibrium(problem, fluid: str = "drained", mirror=None):
-    """The equilibrium states of a problem's loading: frozen fluid when no fluid moves, else the bath's;
+class HeldContent(DrainedEquilibrium):
+    """The grand potential's states at a transient run's content, held in every cell (module docstring): each
+    cell's content is the cell's mean of ``content(t, Y)`` (a 4 x 4 Gauss rule on the cell's bilinear map),
+    set by :meth:`set_load`. Its states at one load time are elastic ones: path independent."""
+
+    GAUSS = 4
+
+    def __init__(self, problem, content, mirror=None):
+        super().__init__(problem, "undrained", mirror)
+        self.fluid = "transient"
+        self.bcs, self.kept = self.bcs + self.kept, []  # the flat state holds its content too
+        self.content = content
+        V_c, _ = compat.collapse(self.space.sub(1))
+        self._y, self._w = _cell_quadrature(problem.domain, V_c, self.GAUSS)
+
+    def set_load(self, t: float) -> None:
+        super().set_load(t)
+        self._content.x.array[:] = (self.content(t, self._y) * self._w).sum(axis=1)
+
+    def keep(self, flat: np.ndarray) -> None:
+        pass
+
+
+def _cell_quadrature(domain, V0, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """For each local dof of a cell-wise constant space on a quadrilateral mesh: the y of an n x n Gauss rule's
+    points on its cell and their weights over the cell's area (summing to 1), shape (dofs, n * n)."""
+    g, gw = np.polynomial.legendre.leggauss(n)
+    xi, eta = np.meshgrid(0.5 * (g + 1.0), 0.5 * (g + 1.0), indexing="ij")
+    xi, eta, wts = xi.ravel(), eta.ravel(), np.outer(gw, gw).ravel() / 4.0
+    nodes = compat.node_coordinates(domain)[compat.cell_geometry_nodes(domain)[:, :4]]  # (cells, 4, 2)
+    # dolfinx's quadrilateral: vertices at (0, 0), (1, 0), (0, 1), (1, 1) of the reference square
+    shape = np.stack([(1 - xi) * (1 - eta), xi * (1 - eta), (1 - xi) * eta, xi * eta])  # (4, points)
+    d_xi = np.stack([-(1 - eta), 1 - eta, -eta, eta])
+    d_eta = np.stack([-(1 - xi), -xi, 1 - xi, xi])
+    jx = np.einsum("vp,cvk->cpk", d_xi, nodes)
+    je = np.einsum("vp,cvk->cpk", d_eta, nodes)
+    det = np.abs(jx[..., 0] * je[..., 1] - jx[..., 1] * je[..., 0]) * wts
+    y = np.einsum("vp,cv->cp", shape, nodes[..., 1])
+    cells = np.arange(nodes.shape[0])
+    dofs = compat.cell_dofs(V0)[:, 0]
+    imap = V0.dofmap.index_map
+    out_y = np.empty((imap.size_local + imap.num_ghosts, len(wts)))
+    out_w = np.empty_like(out_y)
+    out_y[dofs] = y[cells]
+    out_w[dofs] = det[cells] / det[cells].sum(axis=1, keepdims=True)
+    return out_y, out_w
+
+
+def equilibrium(problem, fluid: str = "drained", mirror=None, content=None):
+    """The equilibrium states of a problem's loading: frozen fluid when no fluid moves, else the bath's, or with
+    ``fluid = "transient"`` a transient run's content held (``content(t, Y)``, :class:`HeldContent`);
     ``mirror``: (line, stiffness) of the trial crease's contact with its mirror image, or None."""
     if not problem.diffusion:
         return FrozenFluid(problem, mirror)
+    if fluid == "transient":
+        if content is None:
+            raise ValueError("fluid = 'transient' needs the run's content field")
+        return HeldContent(problem, content, mirror)
     return DrainedEquilibrium(problem, fluid, mirror)

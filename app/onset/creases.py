@@ -32,7 +32,11 @@ problem's loading, and the test needs a flat state at every load without a histo
 - a swelling loading: the body in equilibrium with its bath at mu_bar(t) (quasi-static swelling, the
   drained limit), the energy the grand potential G = Psi - mu_bar (fluid volume); the creased state's fluid
   is free to follow (drained: both states in equilibrium with the bath) or held at the flat state's
-  (undrained). :mod:`app.model.equilibrium` writes both energies.
+  (undrained);
+- a swelling run's own transient (``fluid = "transient"``, ``content``): the flat state at load time t holds
+  the content the run's uniform transient has reached at t in every cell (from the exact 1D reduction), and
+  so does the creased state (undrained: the crease forms faster than the fluid moves).
+:mod:`app.model.equilibrium` writes the energies.
 """
 
 from __future__ import annotations
@@ -53,7 +57,12 @@ class CreaseFailed(RuntimeError):
 
 
 class FlatFailed(CreaseFailed):
-    """The flat state could not be solved: nothing is known about the crease at that load."""
+    """The flat state could not be solved: nothing is known about the crease at that load. ``reached``: the
+    last load the flat state was solved at on the way."""
+
+    def __init__(self, message: str, reached: float = 0.0):
+        super().__init__(message)
+        self.reached = reached
 
 
 @dataclass
@@ -85,13 +94,14 @@ class CreaseTrial:
     """The trial crease of length ``length`` [mm, reference] at the symmetry line x = ``line`` of a problem:
     under a loading that moves no fluid the states' energy is the stored energy; under swelling the states
     are in equilibrium with the bath and the energy is the grand potential, with the creased state's fluid
-    free (``fluid = "drained"``) or held at the flat state's (``"undrained"``): :mod:`app.model.equilibrium`."""
+    free (``fluid = "drained"``) or held at the flat state's (``"undrained"``), or both hold a transient run's
+    content at t (``"transient"``, ``content(t, Y)``): :mod:`app.model.equilibrium`."""
 
     def __init__(self, problem, length: float, settings: SolverSettings, substeps: int = 20, line: float = 0.0,
-                 fluid: str = "drained", mirror_stiffness: float | None = None):
+                 fluid: str = "drained", mirror_stiffness: float | None = None, content=None):
         p = self.problem = problem
         self.grows = mirror_stiffness is not None
-        sys = self.system = equilibrium(p, fluid, (line, mirror_stiffness) if self.grows else None)
+        sys = self.system = equilibrium(p, fluid, (line, mirror_stiffness) if self.grows else None, content)
         self.length, self.line, self.substeps = length, line, substeps
         self._creased = {}  # growing: the creased states with less energy than the flat one, by load time
         fdim = p.domain.topology.dim - 1
@@ -125,15 +135,17 @@ class CreaseTrial:
         solved one at the nearest load at or below t, so always forwards in the load (a swelling gel's flat
         state is not reliably followed back down). Its energy."""
         sys = self.system
-        # frozen fluid: from the last flat state, up or down in the applied strain (a path-independent
-        # elastic state); in equilibrium with a bath: forwards only
-        start = self._last if sys.fluid == "frozen" else max(tk for tk in self._solved if tk <= t)
+        # frozen fluid or a transient run's content held: from the last flat state, up or down in the load (a
+        # path-independent elastic state); in equilibrium with a bath: forwards only
+        start = self._last if sys.fluid in ("frozen", "transient") else max(tk for tk in self._solved if tk <= t)
         sys.w.x.array[:] = self._solved[start]
         failed, _ = self._step_load(self.flat_solver, start, t, FLAT_HALVINGS)
         if failed is not None:
             tk, reason, done = failed
+            self._last = done  # the flat state in w is at that load (path independent states)
+            self._solved[done] = sys.w.x.array.copy()
             raise FlatFailed(f"the flat state did not converge at t = {tk:.6g} s (SNES reason {reason}, "
-                             f"load steps halved {FLAT_HALVINGS} times from t = {done:.6g} s)")
+                             f"load steps halved {FLAT_HALVINGS} times from t = {done:.6g} s)", done)
         sys.set_load(t)  # the load of the state in w (also when it was solved before)
         self._flat = self._solved[t] = sys.w.x.array.copy()
         self._last = t
@@ -245,6 +257,8 @@ class CreaseTrial:
         lo = self.problem.loading
         if self.system.fluid == "frozen":
             return f"applied strain {lo.applied_strain(t):.4g}"
+        if self.system.fluid == "transient":
+            return f"the run's content at that time, growth {self._growth:.4g} mm"
         return f"bath potential {lo.mu_bar(t):.4g} MPa, growth {self._growth:.4g} mm"
 
     def _shape(self, creased: np.ndarray, flat: np.ndarray) -> tuple[float, float]:

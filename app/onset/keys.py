@@ -33,9 +33,11 @@ STABILITY: dict[str, Key] = {
                          "the free surface beyond the trial crease may fold onto the symmetry line (contact with "
                          "its mirror image, stiffness contact_stiffness) and the crease grow to its size of least "
                          "energy, followed down in load to its onset; false: held at its size (docs/creases.md)"),
-    "crease_fluid": key(str, "drained", one_of("drained", "undrained"),
+    "crease_fluid": key(str, "drained", one_of("drained", "undrained", "transient"),
                         "under swelling: the creased state's fluid follows the bath (drained) or keeps the flat "
-                        "state's content (undrained); without fluid motion it has no effect"),
+                        "state's content (undrained), both states in equilibrium with the bath; or both states hold "
+                        "the run's own transient content at each time (transient: a bilayer, from its exact 1D "
+                        "transient); without fluid motion it has no effect"),
     "contact": key(bool, False, None, "self-contact of the traction-free surface as a penalty term: a followed "
                    "branch goes on past the fold into creases (docs/creases.md)"),
     "contact_stiffness": key(float, 1000.0, in_closed(10.0, 1.0e6),

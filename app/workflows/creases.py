@@ -14,6 +14,9 @@ Under compression the load is the applied strain (linear in time). Under swellin
 equilibria with the bath at mu_bar(t) (quasi-static swelling) and the load is reported as the flat state's
 growth and the bath potential; which comes first, crease or wrinkle, is then decided on the growth (a
 transient run's wrinkling onset is not at equilibrium at its time, its growth is the paper's measure).
+With ``stability.crease_fluid = "transient"`` the states hold the run's own transient content at time t
+instead (the laterally uniform transient of the exact 1D reduction, computed once on rank 0): the load is
+the run's time, to time.end, and which comes first is decided on the time.
 """
 
 from __future__ import annotations
@@ -22,8 +25,10 @@ import math
 
 from app import config, factory, geometry, logging_setup
 from app.onset.creases import CreaseFailed, CreaseTrial, FlatFailed
+from app.reduced.transient import TransientFailed, content_profile
 from app.solvers.newton import SolverSettings
 from app.workflows.convergence import richardson
+from app.workflows.reduced import settings as reduced_settings
 
 SCAN_POINTS = 8  # the coarsest level's load grid over the run
 BISECTIONS = 2  # the bracket is halved this often before regula falsi (its far end may be far past the onset)
@@ -71,6 +76,8 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
     settings = SolverSettings.from_config(cfg)
     fluid = cfg["stability"]["crease_fluid"]
     grows = cfg["stability"]["crease_growth"]
+    transient = fluid == "transient" and not config.loading_kind(cfg).fluid_frozen
+    content = _content_profile(cfg, comm, log) if transient else None
     levels, found, swelling, wrinkling, depth, pilot = [], None, False, None, 0.0, None
     queue = list(resolutions)
     while queue:
@@ -82,13 +89,16 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
         mu = getattr(surface, config.law(cfg).stiffness)  # the energies are reported per mu c^2
         # a growing crease: the mirror contact's stiffness per area, kappa mu / h at the tip's elements
         mirror = cfg["stability"]["contact_stiffness"] * mu * resolution / c if grows else None
-        trial = CreaseTrial(problem, c, settings, line=kind.crease_line(cfg), fluid=fluid, mirror_stiffness=mirror)
+        trial = CreaseTrial(problem, c, settings, line=kind.crease_line(cfg), fluid=fluid, mirror_stiffness=mirror,
+                            content=content)
         swelling = trial.system.fluid != "frozen"
+        # the load's end: the bath's equilibria change until the ramp ends; a transient's content to time.end
+        end = cfg["time"]["end"] if transient else problem.loading.load_end()
         try:
-            if swelling and critical is not None and wrinkling is None:
-                at = min(critical["time"], problem.loading.load_end())
+            if swelling and not transient and critical is not None and wrinkling is None:
+                at = min(critical["time"], end)
                 wrinkling = {"growth_mm": critical["growth_mm"], "equilibrium_growth_mm": trial.flat_growth(at)}
-            level = _level(trial, found, problem.loading.load_end(), mu * c * c, log)
+            level = _level(trial, found, end, mu * c * c, log)
         finally:
             trial.destroy()
         level.update(resolution=resolution, tip_size_mm=c / resolution, tip_depth_mm=depth, cells=problem.cells())
@@ -137,10 +147,29 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
             "method": ("trial crease on the symmetry line, growing in contact with its mirror image to its size of "
                        "least energy, followed down in load" if grows else
                        "trial crease of fixed size on the symmetry line") + " (Hong, Zhao & Suo 2009)"
-                      + (f"; states in equilibrium with the bath, grand potentials compared ({fluid})"
+                      + ("; the run's own transient states (content from the exact 1D transient, held in every "
+                         "cell: undrained), stored energies compared" if transient else
+                         f"; states in equilibrium with the bath, grand potentials compared ({fluid})"
                          if swelling else ""),
             "penetration_mm": max((e["penetration_mm"] for lv in levels for e in lv["trials"]
                                    if "penetration_mm" in e and e["difference"] > 0), default=0.0)}
+
+
+def _content_profile(cfg: dict, comm, log):
+    """The run's laterally uniform transient content (:func:`app.reduced.transient.content_profile`) to
+    time.end, at the 1D reduction's resolution (its [reduced] keys): computed on rank 0, broadcast."""
+    profile, error = None, None
+    if comm.rank == 0:
+        try:
+            profile = content_profile(factory.section(cfg), reduced_settings(cfg).resolution, cfg["time"]["end"])
+        except TransientFailed as err:
+            error = str(err)
+    profile, error = comm.bcast((profile, error), root=0)
+    if error is not None:
+        raise CreaseFailed(f"the run's uniform transient (1D) failed: {error}")
+    log(f"creases: the run's content from its uniform 1D transient, {len(profile.times)} steps to "
+        f"t = {profile.times[-1]:.4g} s")
+    return profile
 
 
 def _extrapolated(values: list, snap: bool) -> dict:
@@ -292,12 +321,25 @@ def _bracket(difference, guess: float | None, end: float):
     """((t, dPi > 0), (t, dPi <= 0)) or None if the difference stays positive to ``end``: a scan of the run
     (no ``guess``), or a march from ``guess`` in steps of MARCH of it, up or down as its sign says."""
     if guess is None:
-        prev = None
-        for t in [end * k / SCAN_POINTS for k in range(1, SCAN_POINTS + 1)]:
-            f = difference(t)
+        prev, loads, narrowed = None, [end * k / SCAN_POINTS for k in range(1, SCAN_POINTS + 1)], None
+        while loads:
+            t = loads.pop(0)
+            try:
+                f = difference(t)
+            except FlatFailed as err:
+                # the flat state itself ends before t (a transient's surface past its own stability): scan
+                # again, once, up to the last load it was solved at; a crease onset lies below it or nowhere
+                start = prev[0] if prev else 0.0
+                if narrowed or err.reached <= start:
+                    raise
+                narrowed = err
+                loads = [start + (err.reached - start) * k / SCAN_POINTS for k in range(1, SCAN_POINTS + 1)]
+                continue
             if f <= 0:
                 return (prev or _positive_below(difference, t, end)), (t, f)
             prev = (t, f)
+        if narrowed is not None:  # no onset below the flat state's end: nothing is known beyond it
+            raise narrowed
         return None
     step = MARCH * guess
     t, f = guess, difference(guess)
@@ -332,10 +374,16 @@ def _first(onset: dict | None, critical: dict | None, wrinkling: dict | None = N
         return None
     if onset is None:
         return "wrinkle" if critical else None
-    measure = "growth_mm" if "growth_mm" in onset else "time"
+    measure = _measure(onset)
     if critical is None or onset[measure] < critical[measure]:
         return "crease"
     return None if onset.get("snap") else "wrinkle"  # an upper bound above the wrinkling onset decides nothing
+
+
+def _measure(onset: dict) -> str:
+    """What a crease onset is compared with the wrinkling onset on: the growth of an equilibrium state, else the
+    time (a compression's, or the run's own transient)."""
+    return "growth_mm" if "growth_mm" in onset and onset.get("fluid") != "transient" else "time"
 
 
 def quasi_static(wrinkling: dict) -> bool:
@@ -352,6 +400,10 @@ def _onset_line(onset: dict | None) -> str:
         return _onset_line({**onset, "snap": False}).replace(" from ", " from at most ", 1) + (
             " (the trial crease snaps there to a far deeper fold: a larger crease has less energy, the onset is "
             "at or below this load)")
+    if onset.get("fluid") == "transient":
+        return (f"on the run's own transient state (its content held: undrained), a crease has less energy than "
+                f"the flat surface from t = {onset['time']:.5g} +- {onset['time_error']:.2g} s (growth "
+                f"{onset['growth_mm'] * 1e3:.5g} +- {onset['growth_error'] * 1e3:.2g} um)")
     if "growth_mm" in onset:
         return (f"in equilibrium with the bath, a crease has less grand potential than the flat surface from a "
                 f"growth of {onset['growth_mm'] * 1e3:.5g} +- {onset['growth_error'] * 1e3:.2g} um (bath potential "
@@ -371,8 +423,8 @@ def describe(block: dict, critical: dict | None) -> str:
                        "these equilibrium states do not say which comes first (a quasi-static ramp would)")
     if onset is None:
         return line
-    measure, unit, scale, at = (("growth_mm", "um", 1e3, "a growth of") if "growth_mm" in onset
-                                else ("time", "s", 1.0, "t ="))
+    measure = _measure(onset)
+    unit, scale, at = ("um", 1e3, "a growth of") if measure == "growth_mm" else ("s", 1.0, "t =")
     if critical is None:
         return line + "; no wrinkling onset within the run: the crease comes first"
     where = f"the wrinkling onset at {at} {critical[measure] * scale:.5g} {unit}"
