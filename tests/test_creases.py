@@ -273,7 +273,8 @@ def test_a_scan_whose_flat_state_ends_is_narrowed_to_where_it_was_solved():
     bilayer at ratio 2, t = 0.9907 s between scan points 0.75 and 1.0 s): the scan then looks again, once,
     between its last positive load and the last load the flat state reached. An onset there is bracketed
     and found (here the difference 0.52 - t, the flat state solved up to 0.53: 0.52 to the level's
-    tolerance); none there ends the level with FlatFailed, as before."""
+    tolerance); none there ends the level with FlatFailed, as before. A finer level's march from the coarser
+    onset does the same."""
     from types import SimpleNamespace
 
     def fake(root, limit):
@@ -292,3 +293,8 @@ def test_a_scan_whose_flat_state_ends_is_narrowed_to_where_it_was_solved():
     assert all(tr["time"] <= 0.53 for tr in level["trials"])
     with pytest.raises(FlatFailed):
         workflow._level(fake(0.58, 0.55), None, 1.0, 1.0, lambda msg: None)
+    # a finer level marching from the coarser onset (steps of 3% of it) narrows its march the same way
+    level = workflow._level(fake(0.52, 0.53), 0.515, 1.0, 1.0, lambda msg: None)
+    assert level["time"] == pytest.approx(0.52, rel=workflow.TOLERANCE)
+    with pytest.raises(FlatFailed):
+        workflow._level(fake(0.58, 0.55), 0.515, 1.0, 1.0, lambda msg: None)

@@ -151,8 +151,9 @@ def test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_stati
     2.29, 4 elements along the crease): the 2D flat state holding the 1D content has the 1D state's growth
     (measured 7e-9 relative: the two are one state, solved by two methods); the ramp is slow, so the
     transient state is the equilibrium one to its lag (growth 0.09% below) and the trial's energy difference
-    is the undrained trial's on the equilibrium state (measured 1e-6 relative). The content travels from
-    rank 0, and 1 and 2 ranks give the same energies (1e-8)."""
+    is the undrained trial's on the equilibrium state (measured 1e-6 relative). The 1D surface stretch is the
+    closed-form equilibrium at the bath's potential (measured 1e-12). The content travels from rank 0, and 1
+    and 2 ranks give the same energies (1e-8)."""
     from mpi4py import MPI
 
     cfg = layer("stability.creases=true", "stability.crease_fluid=transient")
@@ -170,6 +171,13 @@ def test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_stati
         finally:
             trial.destroy()
 
+    # the 1D surface stretch, where the bath meets the gel, is the closed-form equilibrium at its potential
+    # (measured 1e-12) at every stored step: the small-crease limit's input
+    mat = factory.layer_materials(cfg)["substrate"]
+    mu_bar = factory.section(cfg).loading.mu_bar
+    for k in range(0, len(profile.times), len(profile.times) // 7):
+        assert profile.surface_stretch[k] == pytest.approx(
+            theory.constrained_layer_stretch(mat, mu_bar(profile.times[k])), rel=1e-9)
     got = one(comm, "transient")
     assert got.growth == pytest.approx(profile.growth_at(t), rel=1e-6)
     eq = one(comm, "undrained")
@@ -179,3 +187,21 @@ def test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_stati
         ref = one(MPI.COMM_SELF, "transient") if comm.rank == 0 else None
         ref = comm.bcast(None if ref is None else (ref.flat_energy, ref.creased_energy), root=0)
         assert (got.flat_energy, got.creased_energy) == pytest.approx(ref, rel=1e-8)
+
+
+def test_a_transient_crease_is_compared_with_the_wrinkle_on_the_runs_own_time():
+    """On the run's own transient (crease_fluid = "transient") the crease and the wrinkle are states of one
+    history: which comes first is decided on the time, whatever the growth of an equilibrium state would be,
+    and the log line gives the small-crease limit (where the surface's stretch reaches 2.396) beside the
+    trial's onset. The paper's bilayer at modulus ratio 2 (docs/creases.md): the crease at t = 0.9852 s
+    before the wrinkle at 1.0231 s."""
+    onset = {"time": 0.98516, "time_error": 4e-4, "growth_mm": 0.010913, "growth_error": 2e-5, "mu_bar": -1.25,
+             "mu_bar_error": 0.01, "fluid": "transient"}
+    limit = {"time": 0.97655, "growth_mm": 0.010341, "surface_stretch": theory.CREASE_STRETCH_RATIO}
+    assert workflow._first(onset, {"time": 1.0231, "growth_mm": 0.0132}) == "crease"
+    # a wrinkle earlier in time comes first even where its growth would be larger
+    assert workflow._first(onset, {"time": 0.98, "growth_mm": 0.0132}) == "wrinkle"
+    line = workflow.describe({"onset": onset, "first": "crease", "small_crease_limit": limit},
+                             {"time": 1.0231, "growth_mm": 0.0132})
+    assert "transient" in line and "t = 0.97655 s" in line and "crease comes first" in line and "\n" not in line
+    assert theory.CREASE_STRETCH_RATIO == pytest.approx(HZS_RATIO)

@@ -178,6 +178,16 @@ class HeldContent(DrainedEquilibrium):
     def keep(self, flat: np.ndarray) -> None:
         pass
 
+    def load_steps(self, start: float, t: float) -> int:
+        """Steps from load ``start`` to t: one per STEPS_PER_LOAD_STEP of the content's stored steps between them
+        (the 1D transient's own steps each change its state by about 1%)."""
+        lo, hi = min(start, t), max(start, t)
+        times = getattr(self.content, "times", None)
+        between = 0 if times is None else int(np.count_nonzero((times > lo) & (times <= hi)))
+        return max(1, -(-between // self.STEPS_PER_LOAD_STEP))
+
+    STEPS_PER_LOAD_STEP = 10
+
 
 def _cell_quadrature(domain, V0, n: int) -> tuple[np.ndarray, np.ndarray]:
     """For each local dof of a cell-wise constant space on a quadrilateral mesh: the y of an n x n Gauss rule's

@@ -30,6 +30,10 @@ from app.model.material import chemical_potential
 BIOT_STRETCH = 0.5437
 
 
+HZS_CREASE_STRAIN = 0.354  # Hong, Zhao & Suo 2009: the crease onset of a neo-Hookean half-space in plane strain
+CREASE_STRETCH_RATIO = 1.0 / (1.0 - HZS_CREASE_STRAIN) ** 2  # the same as a ratio of principal stretches: 2.396
+
+
 def _undrained_pxx(mat: Hydrogel, e: float) -> float:
     """P_xx of F = diag(1 + e, l) with P_yy = 0 and s = s0 (plane strain); P written out for this F
     (tests/test_material.py checks it against the law's UFL P = dpsi/dF)."""

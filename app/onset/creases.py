@@ -198,7 +198,11 @@ class CreaseTrial:
         return taken
 
     def _steps(self, start: float, t: float) -> int:
-        """Load steps from ``start`` to t: at most FLAT_STRAIN_STEP of applied strain each."""
+        """Load steps from ``start`` to t: at most FLAT_STRAIN_STEP of applied strain each, or the system's own
+        count (a transient's content: :meth:`app.model.equilibrium.HeldContent.load_steps`)."""
+        own = getattr(self.system, "load_steps", None)
+        if own is not None:
+            return own(start, t)
         lo = self.problem.loading
         return max(1, int(np.ceil(abs(lo.applied_strain(t) - lo.applied_strain(start)) / FLAT_STRAIN_STEP)))
 

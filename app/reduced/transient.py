@@ -337,6 +337,7 @@ class ContentProfile:
     coefficients: np.ndarray  # (m, n, degree) c's polynomial in each cell (numpy.polyval order) of
     # (Y - the cell's lower vertex) / the cell's width
     growth: np.ndarray  # (m,) the uniform state's growth at each step [mm]
+    surface_stretch: np.ndarray  # (m,) the stretch across the layers at the permeable surface, 1 + dv/dY there
 
     def _weights(self, t: float) -> tuple[int, int, float]:
         times = self.times
@@ -363,6 +364,17 @@ class ContentProfile:
         i, j, theta = self._weights(t)
         return float((1.0 - theta) * self.growth[i] + theta * self.growth[j])
 
+    def first_surface_stretch(self, value: float) -> float | None:
+        """The first time the surface's stretch reaches ``value`` (linear between steps), None if never."""
+        above = np.nonzero(self.surface_stretch >= value)[0]
+        if len(above) == 0:
+            return None
+        j = int(above[0])
+        if j == 0:
+            return float(self.times[0])
+        a, b = self.surface_stretch[j - 1], self.surface_stretch[j]
+        return float(self.times[j - 1] + (value - a) / (b - a) * (self.times[j] - self.times[j - 1]))
+
 
 def content_profile(section: Section, res: Resolution, t_end: float) -> ContentProfile:
     """Run the planar section's uniform transient to ``t_end`` (adaptive steps) and keep its content field at
@@ -377,12 +389,18 @@ def content_profile(section: Section, res: Resolution, t_end: float) -> ContentP
     n = len(nodes) - 1
     if len(xq) != n * d + 1 or not np.allclose(xq[::d], nodes, rtol=0.0, atol=1e-12):
         raise RuntimeError("the 1D flux dofs are not d + 1 per cell in coordinate order")
-    coefficients = np.empty((len(steps), n, d))
+    coefficients, stretch = np.empty((len(steps), n, d)), np.empty(len(steps))
+    v_order = np.argsort(model.x_v)
+    if not np.allclose(model.x_v[v_order], xq, rtol=0.0, atol=1e-12):
+        raise RuntimeError("the 1D displacement and flux dofs do not share their points")
+    top, h_top = (n - 1) * d, nodes[-1] - nodes[-2]  # the last cell (the permeable surface at its end)
     for m, snap in enumerate(steps):
+        v = snap.state[model.v_dofs][v_order][top:]
+        stretch[m] = 1.0 + np.polyval(np.polyder(np.polyfit((xq[top:] - nodes[-2]) / h_top, v, d)), 1.0) / h_top
         Q = snap.state[model.q_dofs][order]
         for i in range(n):
             h = nodes[i + 1] - nodes[i]
             xi = (xq[i * d:i * d + d + 1] - nodes[i]) / h
             coefficients[m, i] = -np.polyder(np.polyfit(xi, Q[i * d:i * d + d + 1], d)) / h  # c = -dQ/dY
     return ContentProfile(np.array([s.t for s in steps]), np.asarray(nodes, float), coefficients,
-                          np.array([s.growth for s in steps]))
+                          np.array([s.growth for s in steps]), stretch)

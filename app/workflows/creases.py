@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 
 from app import config, factory, geometry, logging_setup
+from app.model import theory
 from app.onset.creases import CreaseFailed, CreaseTrial, FlatFailed
 from app.reduced.transient import TransientFailed, content_profile
 from app.solvers.newton import SolverSettings
@@ -143,6 +144,8 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
             strain_rate = last["applied_strain"] / last["time"]  # the compression ramp is linear in t
             onset.update(applied_strain=strain_rate * t, applied_strain_error=abs(strain_rate) * err)
     extra = {"wrinkling_equilibrium": wrinkling} if wrinkling is not None else {}
+    if transient:
+        extra["small_crease_limit"] = _small_crease_limit(content, log)
     return {"onset": onset, "crease_size_mm": c, "levels": levels, "growth": grows, "tip_depth_mm": depth, **extra,
             "method": ("trial crease on the symmetry line, growing in contact with its mirror image to its size of "
                        "least energy, followed down in load" if grows else
@@ -170,6 +173,20 @@ def _content_profile(cfg: dict, comm, log):
     log(f"creases: the run's content from its uniform 1D transient, {len(profile.times)} steps to "
         f"t = {profile.times[-1]:.4g} s")
     return profile
+
+
+def _small_crease_limit(profile, log) -> dict | None:
+    """Where the trial crease tends as it shrinks on a transient state: a crease much smaller than the depth over
+    which the content varies sees a uniformly prestretched surface, and forms when the surface's stretch ratio
+    (across the layers / along them = 1) reaches Hong, Zhao & Suo's 2.396 (their strain 0.354). From the 1D
+    transient's surface stretch; None if it is never reached."""
+    t = profile.first_surface_stretch(theory.CREASE_STRETCH_RATIO)
+    if t is None:
+        return None
+    out = {"time": t, "growth_mm": profile.growth_at(t), "surface_stretch": theory.CREASE_STRETCH_RATIO}
+    log(f"creases: the small-crease limit: the surface's stretch reaches {theory.CREASE_STRETCH_RATIO:.4g} at "
+        f"t = {t:.6g} s, growth {out['growth_mm'] * 1e3:.5g} um")
+    return out
 
 
 def _extrapolated(values: list, snap: bool) -> dict:
@@ -345,12 +362,23 @@ def _bracket(difference, guess: float | None, end: float):
     t, f = guess, difference(guess)
     if f <= 0:
         return _positive_below(difference, t, end, step), (t, f)
+    narrowed = None
     while t < end:
         prev = (t, f)
         t = min(end, t + step)
-        f = difference(t)
+        try:
+            f = difference(t)
+        except FlatFailed as err:  # the flat state ends before t: march on to where it was solved, finer
+            if narrowed is not None or err.reached <= prev[0]:
+                raise
+            narrowed, end = err, err.reached
+            step = (end - prev[0]) / SCAN_POINTS
+            t, f = prev
+            continue
         if f <= 0:
             return prev, (t, f)
+    if narrowed is not None:
+        raise narrowed
     return None
 
 
@@ -416,6 +444,10 @@ def _onset_line(onset: dict | None) -> str:
 def describe(block: dict, critical: dict | None) -> str:
     onset = block["onset"]
     line = _onset_line(onset)
+    limit = block.get("small_crease_limit")
+    if limit is not None:
+        line += (f" [as the trial crease shrinks: t = {limit['time']:.5g} s, growth {limit['growth_mm'] * 1e3:.5g} um, "
+                 "where the surface's stretch reaches Hong, Zhao & Suo's ratio]")
     wrinkling = block.get("wrinkling_equilibrium")
     if wrinkling is not None and not quasi_static(wrinkling):
         return line + (f"; the run's wrinkling onset (growth {wrinkling['growth_mm'] * 1e3:.5g} um) is far from "
