@@ -20,7 +20,7 @@ from conftest import long_physics, run_to_end
 from mpi4py import MPI
 
 from app import config
-from app.model.contact import GAP_LIMIT, SelfContact, _crossing_segments, _gap_derivatives
+from app.model.contact import GAP_LIMIT, SelfContact, _gap_derivatives, crossing_segments
 
 
 def test_the_gap_and_the_penalty_have_their_finite_difference_derivatives():
@@ -84,7 +84,7 @@ def test_segment_crossings_are_those_of_a_check_of_every_pair():
         x = np.cumsum(rng.normal(size=(50, 2)), axis=0)  # a random walk: a crumpled closed polyline
         segs = np.array([(i, i + 1) for i in range(49)] + [(49, 0)])
         want = every_pair(x, segs)
-        assert sorted(map(tuple, _crossing_segments(x, segs).tolist())) == want
+        assert sorted(map(tuple, crossing_segments(x, segs).tolist())) == want
         total += len(want)
     assert total > 100
 

@@ -70,10 +70,11 @@ def _gap_derivatives(p: np.ndarray, a: np.ndarray, b: np.ndarray):
     return g, grad, M.T @ H @ M
 
 
-def _crossing_segments(x: np.ndarray, segments: np.ndarray) -> np.ndarray:
+def crossing_segments(x: np.ndarray, segments: np.ndarray, touching: bool = False) -> np.ndarray:
     """The pairs (A, B), A < B, of segments (m, 2) of node indices, with no node in common, that cross at
     node positions ``x`` (n, 2): inside both (a node touching a segment is in contact, not through it;
-    collinear overlaps do not count: a slit's two faces lie on each other in the reference). Candidates by
+    ``touching``: that counts too; collinear overlaps never count: a slit's two faces lie on each other in
+    the reference). Candidates by
     their bounding boxes (sorted along x, each segment against those whose x range starts within its own),
     then the exact test: O(m log m) for a surface of short segments."""
     m = len(segments)
@@ -98,7 +99,10 @@ def _crossing_segments(x: np.ndarray, segments: np.ndarray) -> np.ndarray:
     den = cross(da, db)
     with np.errstate(divide="ignore", invalid="ignore"):
         s, t = cross(r, db) / den, cross(r, da) / den  # along A, along B
-    hit = (den != 0) & (s > 0) & (s < 1) & (t > 0) & (t < 1)
+    if touching:
+        hit = (den != 0) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
+    else:
+        hit = (den != 0) & (s > 0) & (s < 1) & (t > 0) & (t < 1)
     return np.sort(np.stack([A[hit], B[hit]], axis=1), axis=1)
 
 
@@ -175,7 +179,7 @@ class SelfContact:
         has passed through itself: such a state is outside the domain of the term. The penalty's own small
         overlaps, within the reach, are not (the rule reads positions only, no pairing)."""
         x = self.X + u
-        found = _crossing_segments(x, self.segments)
+        found = crossing_segments(x, self.segments)
         if not len(found):
             return found
 

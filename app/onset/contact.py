@@ -16,7 +16,7 @@ import ufl
 from mpi4py import MPI
 
 from app import compat
-from app.model.contact import GAP_LIMIT
+from app.model.contact import GAP_LIMIT, crossing_segments
 from app.model.kinematics import deformation_gradient
 from app.model.surface import boundary_displacement, shape_of
 from app.solvers.stepping import ModelLimit
@@ -37,29 +37,17 @@ OVERRUN = "the contact penalty cannot hold this state, the branch cannot be foll
 
 
 def _segments_cross(p: np.ndarray, closed: bool) -> tuple[int, int] | None:
-    """The first pair (i, j) of non-adjacent segments of the polyline p (N, 2) that intersect, else None."""
-    q = np.roll(p, -1, axis=0) if closed else p[1:]
-    a = p if closed else p[:-1]
-    n = len(a)
+    """The first pair (i, j) of non-adjacent segments of the polyline p (N, 2) that intersect or touch, else
+    None (:func:`app.model.contact.crossing_segments` on the polyline's segments)."""
+    n = len(p) if closed else len(p) - 1
     if n < 4:
         return None
-    d = q - a  # segment i: a[i] + s d[i], s in [0, 1]
-
-    def cross(u, v):
-        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-
-    r = a[None, :, :] - a[:, None, :]  # a[j] - a[i]
-    den = cross(d[:, None, :], d[None, :, :])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = cross(r, d[None, :, :]) / den
-        t = cross(r, d[:, None, :]) / den
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    gap = np.abs(i - j)
-    if closed:
-        gap = np.minimum(gap, n - gap)
-    hit = (gap > 1) & (den != 0) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
-    found = np.argwhere(np.triu(hit))
-    return (int(found[0, 0]), int(found[0, 1])) if len(found) else None
+    i = np.arange(n)
+    pairs = crossing_segments(p, np.stack([i, (i + 1) % len(p)], axis=1), touching=True)
+    if not len(pairs):
+        return None
+    first = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))[0]]
+    return int(first[0]), int(first[1])
 
 
 def surface_contact(problem, array: np.ndarray) -> Limit | None:
