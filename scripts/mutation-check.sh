@@ -163,6 +163,15 @@ MUTATIONS = [
     ("a growing crease is closed from the flat state at every load, never followed down", "app/onset/creases.py",
      r"above = \[tk for tk in self\._creased if tk > t\]", "above = []",
      ["tests/test_creases.py::test_a_growing_crease_in_a_bilayer_takes_a_size_of_its_own"]),
+    ("a transient's content taken at the cells' first Gauss point, not their mean", "app/model/equilibrium.py",
+     r"\(self\.content\(t, self\._y\) \* self\._w\)\.sum\(axis=1\)", "self.content(t, self._y)[:, 0]",
+     ["tests/test_creases_swelling.py::"
+      "test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_statically_is_the_undrained_one"]),
+    ("a transient's content profile from the flux, not its derivative", "app/reduced/transient.py",
+     r"coefficients\[m, i\] = -np\.polyder\(np\.polyfit\(xi, Q\[i \* d:i \* d \+ d \+ 1\], d\)\) / h",
+     "coefficients[m, i] = -np.polyfit(xi, Q[i * d:i * d + d + 1], d)[1:] / h",
+     ["tests/test_creases_swelling.py::"
+      "test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_statically_is_the_undrained_one"]),
 ]
 
 
