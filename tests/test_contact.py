@@ -409,3 +409,16 @@ def test_a_tube_passage_folds_all_around_and_is_followed_in_contact(tmp_path):
     angles = np.sort(np.arctan2(centres[:, 1], centres[:, 0]))
     assert np.max(np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))) < 2 * (2 * np.pi / len(angles))
     assert max(float(r["penetration_mm"]) for r in rows) < GAP_LIMIT * cfg["mesh"]["element_size"]
+
+
+def test_the_deepest_contact_of_a_symmetric_crease_does_not_flip_with_roundoff():
+    """A crease's two faces penetrate each other equally by symmetry: the history's contact place is the first
+    in x of the equally deep (to 1e-6) contacts, whichever roundoff makes deeper (a 2-rank resumed run once
+    reported x = 0.11 where the uninterrupted one had 0.09); a deeper contact elsewhere still wins."""
+    from app.model.problem import _deepest
+
+    X = np.array([[0.09, 0.5], [0.11, 0.5], [0.3, 0.5]])
+    nodes = np.array([0, 1, 2])
+    for eps in (1e-13, -1e-13):
+        assert _deepest(nodes, np.array([-2e-6, -2e-6 * (1 + eps), -1e-7]), X) == 0
+    assert _deepest(nodes, np.array([-2e-6, -2e-6, -3e-6]), X) == 2

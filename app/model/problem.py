@@ -208,7 +208,7 @@ class Problem:
             c = self.contact
             state = c.state(self.state.x.array)
             zones = c.penalty.zones(state)
-            deepest = int(state.nodes[np.argmin(state.gaps)]) if len(state.nodes) else None
+            deepest = _deepest(state.nodes, state.gaps, c.penalty.X) if len(state.nodes) else None
             out["extra"] = {"contact_length_mm": c.penalty.contact_length(state), "creases": len(zones),
                             "contact_x_mm": float(c.penalty.X[deepest, 0]) if deepest is not None else float("nan"),
                             "contact_y_mm": float(c.penalty.X[deepest, 1]) if deepest is not None else float("nan"),
@@ -228,3 +228,16 @@ class Problem:
 
     def cells(self) -> int:
         return compat.num_global_cells(self.domain)
+
+
+DEEPEST_TIE = 1e-6  # gaps within this fraction of the deepest are equally deep (a symmetric crease's two faces)
+
+
+def _deepest(nodes: np.ndarray, gaps: np.ndarray, X: np.ndarray) -> int:
+    """The node of the deepest contact: the least gap, and among gaps equal to it within DEEPEST_TIE (a crease's
+    two faces penetrate each other equally by symmetry, and roundoff would pick either) the first in reference
+    x, then y, so that the history's contact place does not flip between runs that differ by roundoff."""
+    g = gaps.min()
+    near = nodes[gaps <= g + DEEPEST_TIE * abs(g)]
+    return int(near[np.lexsort((X[near, 1], X[near, 0]))[0]])
+
