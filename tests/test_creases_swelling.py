@@ -193,7 +193,7 @@ def test_a_transient_crease_is_compared_with_the_wrinkle_on_the_runs_own_time():
     """On the run's own transient (crease_fluid = "transient") the crease and the wrinkle are states of one
     history: which comes first is decided on the time, whatever the growth of an equilibrium state would be,
     and the log line gives the small-crease limit (where the surface's stretch reaches 2.396) beside the
-    trial's onset. The paper's bilayer at modulus ratio 2 (docs/creases.md): the crease at t = 0.9852 s
+    trial's onset. The paper's bilayer at modulus ratio 2 (docs/creases.md): the crease at t = 0.9828 s
     before the wrinkle at 1.0231 s."""
     onset = {"time": 0.98516, "time_error": 4e-4, "growth_mm": 0.010913, "growth_error": 2e-5, "mu_bar": -1.25,
              "mu_bar_error": 0.01, "fluid": "transient"}
