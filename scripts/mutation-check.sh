@@ -172,6 +172,13 @@ MUTATIONS = [
      "coefficients[m, i] = -np.polyfit(xi, Q[i * d:i * d + d + 1], d)[1:] / h",
      ["tests/test_creases_swelling.py::"
       "test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_statically_is_the_undrained_one"]),
+    ("an overrun contact penalty is never raised", "app/onset/contact.py",
+     r"elif self\.p\.contact\.stiffen\(t\):", "elif False:",
+     ["tests/test_contact.py::test_a_soft_penalty_is_raised_until_it_holds_the_contact_and_a_resume_keeps_it"]),
+    ("a resumed run forgets the raised contact penalty", "app/io/checkpoint.py",
+     r'    if meta\.get\("contact"\) and problem\.contact is not None:',
+     '    if False:',
+     ["tests/test_contact.py::test_a_soft_penalty_is_raised_until_it_holds_the_contact_and_a_resume_keeps_it"]),
 ]
 
 

@@ -422,3 +422,35 @@ def test_the_deepest_contact_of_a_symmetric_crease_does_not_flip_with_roundoff()
     for eps in (1e-13, -1e-13):
         assert _deepest(nodes, np.array([-2e-6, -2e-6 * (1 + eps), -1e-7]), X) == 0
     assert _deepest(nodes, np.array([-2e-6, -2e-6, -3e-6]), X) == 2
+
+
+def test_a_soft_penalty_is_raised_until_it_holds_the_contact_and_a_resume_keeps_it(tmp_path):
+    """The creasing layer with a penalty 100 times softer than the default (kappa = 10, the key's lowest): its
+    first contact overruns the penalty (0.14 of an element at kappa 10, measured), so the run raises kappa
+    tenfold and solves that step again, and goes on to time.end with every accepted state within GAP_LIMIT of
+    its element (without the raise it ends there with status contact). Stopped two steps later and resumed
+    from its checkpoint, it goes on with the raised penalty: the same states as the uninterrupted run."""
+    from app.io import checkpoint
+    from app.workflows.run import simulate
+
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    element = CREASING["mesh"]["element_size"]
+    cfg = config.resolve({**CREASING, "time": {**CREASING["time"], "end": 0.8},
+                          "stability": {**CREASING["stability"], "contact_stiffness": 10.0},
+                          "output": {**CREASING["output"], "checkpoint_every": 1}})
+    full = simulate(cfg, base / "full", comm, progress=False)
+    assert full["status"] == "buckled", full["message"]
+    rows = _rows_of(base / "full")
+    first = full["creases"]["first_contact"]
+    assert full["creases"]["stiffened"] == [{"time": first["time"], "contact_stiffness": 100.0}]
+    assert full["creases"]["contact_stiffness"] == 100.0
+    assert max(float(r["penetration_mm"]) for r in rows) < GAP_LIMIT * element
+    stop = next(int(r["step"]) for r in rows if float(r["contact_length_mm"]) > 0) + 2
+    assert stop + 2 <= full["steps"]
+    part = base / "part"
+    stopped = simulate(cfg, part, comm, progress=False, stop_after=stop)
+    assert stopped["status"] == "interrupted"
+    resumed = simulate(cfg, part, comm, progress=False, resume=checkpoint.check(part, cfg, comm))
+    _same_states(rows, _rows_of(part), rel=1e-12 if comm.size == 1 else 1e-10)
+    assert resumed["creases"]["stiffened"] == full["creases"]["stiffened"]

@@ -301,10 +301,11 @@ class _Sink:
                 self.error = self.error or err
 
 
-def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, profiles=None) -> float:
+def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, profiles=None, contact=None) -> float:
     """Write the checkpoint of the run's current state (collective; between steps). Returns its size in
     bytes on rank 0 (0 elsewhere); an OSError on every rank if rank 0 could not write it (the previous
-    checkpoint is then left as it was). ``profiles``: the branch's :class:`SurfaceProfiles` so far."""
+    checkpoint is then left as it was). ``profiles``: the branch's :class:`SurfaceProfiles` so far;
+    ``contact``: the problem's :class:`~app.model.contact.SurfaceContact` (its penalty, raised on the way)."""
     comm = layout.comm
     rank0 = comm.rank == 0
     final = Path(outdir) / FILE
@@ -345,7 +346,8 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, pr
             meta = {"format": FORMAT, "result_hash": result_hash(cfg), "inputs": input_files(cfg), "config": cfg,
                     "ranks": comm.size, "t": stepper.t, "step": stepper.step, "snapshots": snap_meta,
                     "current": current, "stepper": stepper.counters(), "tracker": tracker_meta, "rows": rows,
-                    "profiles_closed": bool(profiles.closed) if profiles else False}
+                    "profiles_closed": bool(profiles.closed) if profiles else False,
+                    "contact": {"kappa": contact.kappa, "raised": contact.raised} if contact is not None else None}
             sink.put("meta", np.frombuffer(json.dumps(meta, default=_json_default).encode(), dtype=np.uint8))
         except (TypeError, ValueError) as err:
             sink.error = sink.error or err
@@ -518,6 +520,9 @@ def restore(resume: Resume, problem, stepper, tracker) -> DofLayout:
         if z is not None:
             z.close()
     stepper.resume_from(snaps[meta["current"]], meta["stepper"])
+    if meta.get("contact") and problem.contact is not None:  # the penalty as the run had raised it
+        problem.contact.set_kappa(meta["contact"]["kappa"])
+        problem.contact.raised = [tuple(r) for r in meta["contact"]["raised"]]
     if meta["tracker"] is not None:
         tracker.restore_checkpoint(meta["tracker"], snaps)
     comm.barrier()
@@ -546,7 +551,8 @@ class Checkpoints:
         if self.layout is None:
             self.layout = DofLayout(problem)
         try:
-            size = write(self.outdir, self.cfg, self.layout, stepper, tracker, rows, profiles)
+            size = write(self.outdir, self.cfg, self.layout, stepper, tracker, rows, profiles,
+                         getattr(problem, "contact", None))
         except OSError as err:  # the run goes on; the previous checkpoint stays
             self.log(f"hydrobuckle: warning: {err}")
             return

@@ -261,6 +261,10 @@ COLUMNS = ("contact_length_mm", "creases", "contact_x_mm", "contact_y_mm", "pene
 # the gap a state may show: a penetration beyond this fraction of the node's tributary length means the
 # penalty was overrun (a crossing the pairing no longer sees): the state is a model limit, not contact
 GAP_LIMIT = 0.1
+# a followed branch whose accepted state penetrates beyond GAP_LIMIT raises the penalty by STIFFEN and
+# solves the step again, up to KAPPA_MAX (the top of stability.contact_stiffness's range)
+STIFFEN = 10.0
+KAPPA_MAX = 1.0e6
 
 # roles of the surface that can touch itself: every boundary that holds no displacement component
 CONTACT_ROLES = ("permeable", "impermeable", "free")
@@ -288,7 +292,8 @@ class SurfaceContact:
     def __init__(self, problem, kappa: float):
         p = self.p = problem
         self.kappa = float(kappa)
-        mu = max(float(getattr(m, m.law.stiffness)) for m in p.materials.values())
+        self.raised: list[tuple[float, float]] = []  # (time, kappa) of each raise on a followed branch
+        mu = self._mu = max(float(getattr(m, m.law.stiffness)) for m in p.materials.values())
         groups = [g for g in p.geo.boundaries if p.geo.boundaries[g] in CONTACT_ROLES]
         domain, V, fdim = p.domain, p.V_u, p.domain.topology.dim - 1
         facets = p.facets_of(groups)
@@ -340,6 +345,20 @@ class SurfaceContact:
         # where this rank's owned surface entries sit in the displacement space (fields for ParaView)
         in_u = {int(w): i for i, w in enumerate(p.u_dofs)}
         self._mine_in_u = np.array([in_u[int(w)] for w in self._mine_local], np.int64)
+
+    def stiffen(self, t: float) -> bool:
+        """Raise kappa by STIFFEN (at the time ``t`` of the step that needs it); False, unchanged, when that
+        would pass KAPPA_MAX."""
+        if self.kappa * STIFFEN > KAPPA_MAX * (1 + 1e-12):
+            return False
+        self.set_kappa(self.kappa * STIFFEN)
+        self.raised.append((float(t), self.kappa))
+        return True
+
+    def set_kappa(self, kappa: float) -> None:
+        self.kappa = float(kappa)
+        self.penalty.stiffness = self.kappa * self._mu
+        self.penalty.k[:] = self.penalty.stiffness
 
     @property
     def size(self) -> int:

@@ -31,9 +31,14 @@ class Limit:
     detail: str
     consequence: str = "the model has no contact and no inverted elements, the branch cannot be followed further"
     overshoot: bool = False  # a converged state that a shorter step may avoid (the stepper retries it)
+    stiffen: bool = False  # a penetration that a stiffer penalty may hold
+    depth: float = 0.0  # that penetration, in elements
+    stiffened: bool = False  # the penalty was raised: the stepper solves the same step again
 
 
 OVERRUN = "the contact penalty cannot hold this state, the branch cannot be followed further"
+# an overrun that a tenfold stiffer penalty reduced by less than this factor is not the penalty's softness
+LOCKED = 0.5
 
 
 def _segments_cross(p: np.ndarray, closed: bool) -> tuple[int, int] | None:
@@ -111,7 +116,8 @@ def contact_summary(problem, rows: list[dict]) -> dict:
         zones.append({"x_mm": [float(X[:, 0].min()), float(X[:, 0].max())],
                       "y_mm": [float(X[:, 1].min()), float(X[:, 1].max())],
                       "length_mm": float(np.sum(c.penalty.tributary[nodes]))})
-    return {"contact": "penalty", "contact_stiffness": c.kappa, "first_contact": first,
+    raised = [{"time": t, "contact_stiffness": k} for t, k in c.raised]
+    return {"contact": "penalty", "contact_stiffness": c.kappa, "stiffened": raised, "first_contact": first,
             "max_penetration_mm": max((float(r.get("penetration_mm") or 0.0) for r in rows), default=0.0),
             "zones": zones}
 
@@ -130,8 +136,8 @@ def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
         if depth[k] > GAP_LIMIT:
             where = tuple(float(v) for v in pen.X[state.nodes[k]])
             return Limit("contact", where, f"the contact penalty is overrun near ({where[0]:.4g}, {where[1]:.4g}) mm:"
-                                           f" penetration {depth[k]:.3g} of the element (limit {GAP_LIMIT:g}); raise "
-                                           "stability.contact_stiffness")
+                                           f" penetration {depth[k]:.3g} of the element (limit {GAP_LIMIT:g})",
+                         stiffen=True, depth=float(depth[k]))
     where = c.tunnelled_crossing(array)  # the penalty's own overlaps in contact, within its reach, are not
     if where is None:
         return None
@@ -155,6 +161,7 @@ class ModelLimits:
         self.p = problem
         self.inversion = InversionCheck(problem)
         self._folded: Limit | None = None  # the limit a failed attempt of the current step reached
+        self._overrun: float | None = None  # the penetration of this step's last overrun, before a raise
 
     def __call__(self, array: np.ndarray) -> Limit | None:
         if self.p.contact is not None:  # with self-contact the surface may touch itself, not pass through
@@ -169,7 +176,7 @@ class ModelLimits:
         return self(array)
 
     def new_step(self) -> None:
-        self._folded = None
+        self._folded = self._overrun = None
 
     def failed_attempt(self, array: np.ndarray, t_try: float, t: float) -> Limit | None:
         """The limit a failed attempt's last iterate reaches (for the log line), or None; ModelLimit when an
@@ -193,10 +200,31 @@ class ModelLimits:
         penalty's reach is the step's overshoot, not yet the branch's end: the pairing follows every Newton
         iterate but reaches only ``REACH`` segment lengths through the surface, and a node that one iterate
         carries farther is missed. With ``retry`` (a shorter step is left) that limit is returned and the
-        stepper cuts the step back; without, it ends the run."""
+        stepper cuts the step back; without, it ends the run. A state that penetrates deeper than GAP_LIMIT of
+        its element raises the penalty (:meth:`app.model.contact.SurfaceContact.stiffen`) and is returned with
+        ``stiffened``: the stepper solves the same step again; past KAPPA_MAX it ends the run."""
         limit = self._of(array)
         if limit is None:
             return None
         if limit.overshoot and retry:
             return limit
+        if limit.stiffen:  # the penalty's own accuracy: raised until it holds the state, up to KAPPA_MAX
+            before, self._overrun = self._overrun, limit.depth
+            old = self.p.contact.kappa
+            if before is not None and limit.depth > LOCKED * before:
+                # a stiffer penalty did not push the node out: the faces crossed where the pairing holds both
+                # sides (a node of each through the other), a state no penalty undoes; a shorter step may not
+                # drive them through
+                limit.detail += (f", as deep as before the penalty was raised to {old:g}: the surface is locked "
+                                 "through itself")
+                if retry:
+                    self._overrun = None
+                    limit.overshoot = True
+                    return limit
+            elif self.p.contact.stiffen(t):
+                limit.stiffened = True
+                limit.detail += f": the penalty is raised from {old:g} to {self.p.contact.kappa:g}"
+                return limit
+            else:
+                limit.detail += f" with stability.contact_stiffness = {old:g}, the largest allowed"
         raise ModelLimit(limit, t)

@@ -342,6 +342,7 @@ class TimeStepper:
         limits = self.limits if self.minimizing else None  # on a branch: where it ends (app.onset.contact)
         if limits is not None:
             limits.new_step()
+        checks = limits or self._contact_checks()  # a converged state's checks: on a branch, or with contact
         while True:
             dt = self._clip(dt, until)
             res, err = self.attempt(dt)
@@ -370,9 +371,13 @@ class TimeStepper:
                 self.rejected += 1
                 dt = control.shrink(dt, err)
                 continue
-            if limits is not None:  # on the branch (the checks read the displacement dofs: w's are the new ones)
+            if checks is not None:  # the checks read the displacement dofs: w's are the new ones
                 new_dt = control.cut_back(dt)
-                limit = limits.accepted(self.system.w.x.array, self.t + dt, retry=new_dt >= control.dt_min)
+                limit = checks.accepted(self.system.w.x.array, self.t + dt, retry=new_dt >= control.dt_min)
+                if limit is not None and limit.stiffened:  # a stiffer contact penalty: the same step again
+                    self.rejected += 1
+                    self.log(f"  the step to t = {self.t + dt:.6g} s: {limit.detail}; solving it again")
+                    continue
                 if limit is not None:  # an overshoot of the contact pairing: rejected, a shorter step tried
                     self.rejected += 1
                     self.log(f"  the step to t = {self.t + dt:.6g} s (dt = {dt:.3g} s) overshoots: {limit.detail}; "
@@ -381,6 +386,16 @@ class TimeStepper:
                     continue
             break
         return self._accept(dt, res.iterations, err)
+
+    def _contact_checks(self):
+        """Before a branch, with self-contact on (a body whose surface touches itself while it swells, as a
+        slit): the checks of every converged state (its penetration within the penalty's accuracy), not the
+        rules for failed attempts, which belong to a followed branch. None without contact."""
+        if self.system.extra is None or self._limits_of is None:
+            return None
+        if self.limits is None:
+            self.limits = self._limits_of()
+        return self.limits
 
     def _diagnose(self, dt: float, reason: int, failures: int) -> None:
         """After a step failed at 4 dt and again at dt for the same reason: is the last converged state
