@@ -298,3 +298,9 @@ def test_a_scan_whose_flat_state_ends_is_narrowed_to_where_it_was_solved():
     assert level["time"] == pytest.approx(0.52, rel=workflow.TOLERANCE)
     with pytest.raises(FlatFailed):
         workflow._level(fake(0.58, 0.55), 0.515, 1.0, 1.0, lambda msg: None)
+    # an onset below the scan's first load, or below a finer level's starting guess: walked down to it
+    for root, guess in ((0.03, None), (0.52, 0.6)):
+        level = workflow._level(fake(root, 2.0), guess, 1.0, 1.0, lambda msg: None)
+        assert level["time"] == pytest.approx(root, rel=workflow.TOLERANCE)
+    with pytest.raises(workflow.CreaseFailed):  # negative down to end / 1000: no onset to bracket
+        workflow._level(fake(1e-4, 2.0), None, 1.0, 1.0, lambda msg: None)

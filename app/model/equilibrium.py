@@ -204,13 +204,12 @@ def _cell_quadrature(domain, V0, n: int) -> tuple[np.ndarray, np.ndarray]:
     je = np.einsum("vp,cvk->cpk", d_eta, nodes)
     det = np.abs(jx[..., 0] * je[..., 1] - jx[..., 1] * je[..., 0]) * wts
     y = np.einsum("vp,cv->cp", shape, nodes[..., 1])
-    cells = np.arange(nodes.shape[0])
-    dofs = compat.cell_dofs(V0)[:, 0]
+    dofs = compat.cell_dofs(V0)[:, 0]  # the dof of each cell, in the order of the geometry's cells
     imap = V0.dofmap.index_map
     out_y = np.empty((imap.size_local + imap.num_ghosts, len(wts)))
     out_w = np.empty_like(out_y)
-    out_y[dofs] = y[cells]
-    out_w[dofs] = det[cells] / det[cells].sum(axis=1, keepdims=True)
+    out_y[dofs] = y
+    out_w[dofs] = det / det.sum(axis=1, keepdims=True)
     return out_y, out_w
 
 

@@ -310,18 +310,9 @@ def _on_the_grown_branch(difference, bracket, end: float):
     positive end was closed from the flat state before that crease was known, and may be a smaller crease
     with more energy (the two coexist near the onset). Evaluated again it is followed down from the
     negative end (:meth:`CreaseTrial.trial`); while that is still negative, the bracket moves down by its
-    width, doubled at every move, to at most end / 1000."""
-    (a, _), (b, fb) = bracket
-    width, floor = b - a, end * 1e-3
-    while True:
-        fa = difference(a)
-        if fa > 0:
-            return (a, fa), (b, fb)
-        if a <= floor:
-            raise CreaseFailed("the grown crease has less energy than the flat state at every load tried, down to "
-                               f"t = {floor:.3g} s: no onset to bracket")
-        b, fb = a, fa
-        a, width = max(floor, a - width), 2 * width
+    width, doubled at every move (:func:`_down_to_positive`)."""
+    (a, _), negative = bracket
+    return _down_to_positive(difference, negative, end, negative[0] - a, 2.0, "the grown crease")
 
 
 def _snapped(trials: list, a: float, b: float, grows: bool) -> bool:
@@ -338,60 +329,63 @@ def _bracket(difference, guess: float | None, end: float):
     """((t, dPi > 0), (t, dPi <= 0)) or None if the difference stays positive to ``end``: a scan of the run
     (no ``guess``), or a march from ``guess`` in steps of MARCH of it, up or down as its sign says."""
     if guess is None:
-        prev, loads, narrowed = None, [end * k / SCAN_POINTS for k in range(1, SCAN_POINTS + 1)], None
-        while loads:
-            t = loads.pop(0)
-            try:
-                f = difference(t)
-            except FlatFailed as err:
-                # the flat state itself ends before t (a transient's surface past its own stability): scan
-                # again, once, up to the last load it was solved at; a crease onset lies below it or nowhere
-                start = prev[0] if prev else 0.0
-                if narrowed or err.reached <= start:
-                    raise
-                narrowed = err
-                loads = [start + (err.reached - start) * k / SCAN_POINTS for k in range(1, SCAN_POINTS + 1)]
-                continue
-            if f <= 0:
-                return (prev or _positive_below(difference, t, end)), (t, f)
-            prev = (t, f)
-        if narrowed is not None:  # no onset below the flat state's end: nothing is known beyond it
-            raise narrowed
-        return None
+        found = _walk(difference, None, 0.0, end / SCAN_POINTS, end)
+        if found is not None and found[0] is None:  # negative at the first load: halve it down to a positive one
+            return _down_to_positive(difference, found[1], end, found[1][0] / 2, 0.5)
+        return found
     step = MARCH * guess
-    t, f = guess, difference(guess)
+    f = difference(guess)
     if f <= 0:
-        return _positive_below(difference, t, end, step), (t, f)
-    narrowed = None
-    while t < end:
-        prev = (t, f)
-        t = min(end, t + step)
+        return _down_to_positive(difference, (guess, f), end, step)
+    return _walk(difference, (guess, f), guess, step, end)
+
+
+def _walk(difference, prev, origin: float, step: float, end: float):
+    """Up from ``origin`` (``prev``: its (t, dPi > 0), or None) in steps of ``step`` to ``end``: (the last
+    positive (t, dPi) or None, the first non-positive) at the first sign change, else None. Where the flat
+    state ends before a load (FlatFailed: a transient's surface past its own stability) the walk starts
+    again, once, from its last positive load (or ``origin``) in SCAN_POINTS steps up to the last load the
+    flat state was solved at; a crease onset lies below it or is not known (FlatFailed again)."""
+    narrowed, k = None, 0
+    if (prev[0] if prev else origin) >= end:
+        return None
+    while True:
+        k += 1
+        t = min(end, origin + k * step)
         try:
             f = difference(t)
-        except FlatFailed as err:  # the flat state ends before t: march on to where it was solved, finer
-            if narrowed is not None or err.reached <= prev[0]:
+        except FlatFailed as err:
+            start = prev[0] if prev else origin
+            if narrowed is not None or err.reached <= start:
                 raise
             narrowed, end = err, err.reached
-            step = (end - prev[0]) / SCAN_POINTS
-            t, f = prev
+            origin, step, k = start, (end - start) / SCAN_POINTS, 0
             continue
         if f <= 0:
             return prev, (t, f)
-    if narrowed is not None:
+        prev = (t, f)
+        if t >= end:
+            break
+    if narrowed is not None:  # no onset below the flat state's end: nothing is known beyond it
         raise narrowed
     return None
 
 
-def _positive_below(difference, t: float, end: float, step: float | None = None):
-    """A load below t where the difference is positive, marching down from t."""
+def _down_to_positive(difference, negative, end: float, width: float, growth: float = 1.0,
+                      what: str = "the trial crease"):
+    """From a load whose difference is not positive, ``negative`` = (t, dPi), down in steps of ``width``
+    (times ``growth`` at every move) to a positive one, at most to end / 1000: ((t, dPi > 0), the lowest
+    non-positive (t, dPi) seen)."""
+    (b, fb), floor = negative, end * 1e-3
     while True:
-        t = t - step if step is not None else t / 2
-        if t < end * 1e-3:
-            raise CreaseFailed("the trial crease has less energy than the flat state at every load tried, down to "
-                               f"t = {end * 1e-3:.3g} s: no onset to bracket")
-        f = difference(t)
-        if f > 0:
-            return t, f
+        if b <= floor:
+            raise CreaseFailed(f"{what} has less energy than the flat state at every load tried, down to "
+                               f"t = {floor:.3g} s: no onset to bracket")
+        a = max(floor, b - width)
+        fa = difference(a)
+        if fa > 0:
+            return (a, fa), (b, fb)
+        b, fb, width = a, fa, width * growth
 
 
 def _first(onset: dict | None, critical: dict | None, wrinkling: dict | None = None) -> str | None:
