@@ -162,6 +162,7 @@ class ModelLimits:
         self.inversion = InversionCheck(problem)
         self._folded: Limit | None = None  # the limit a failed attempt of the current step reached
         self._overrun: float | None = None  # the penetration of this step's last overrun, before a raise
+        self._locked = False  # this step met a crossing that a stiffer penalty did not undo: no more raises
 
     def __call__(self, array: np.ndarray) -> Limit | None:
         if self.p.contact is not None:  # with self-contact the surface may touch itself, not pass through
@@ -177,6 +178,7 @@ class ModelLimits:
 
     def new_step(self) -> None:
         self._folded = self._overrun = None
+        self._locked = False
 
     def failed_attempt(self, array: np.ndarray, t_try: float, t: float) -> Limit | None:
         """The limit a failed attempt's last iterate reaches (for the log line), or None; ModelLimit when an
@@ -211,11 +213,12 @@ class ModelLimits:
         if limit.stiffen:  # the penalty's own accuracy: raised until it holds the state, up to KAPPA_MAX
             before, self._overrun = self._overrun, limit.depth
             old = self.p.contact.kappa
-            if before is not None and limit.depth > LOCKED * before:
+            if self._locked or (before is not None and limit.depth > LOCKED * before):
                 # a stiffer penalty did not push the node out: the faces crossed where the pairing holds both
                 # sides (a node of each through the other), a state no penalty undoes; a shorter step may not
-                # drive them through
-                limit.detail += (f", as deep as before the penalty was raised to {old:g}: the surface is locked "
+                # drive them through (and no further raise is tried in this step)
+                self._locked = True
+                limit.detail += (f", not reduced by raising the penalty to {old:g}: the surface is locked "
                                  "through itself")
                 if retry:
                     self._overrun = None
