@@ -424,12 +424,18 @@ def test_the_deepest_contact_of_a_symmetric_crease_does_not_flip_with_roundoff()
     assert _deepest(nodes, np.array([-2e-6, -2e-6, -3e-6]), X) == 2
 
 
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: on 2 ranks this soft penalty's snap into the crease is "
+                    "decided by MUMPS' parallel roundoff (Debian 13: one run in three inverts an element first)")
 def test_a_soft_penalty_is_raised_until_it_holds_the_contact_and_a_resume_keeps_it(tmp_path):
-    """The creasing layer with a penalty 100 times softer than the default (kappa = 10, the key's lowest): its
-    first contact overruns the penalty (0.14 of an element at kappa 10, measured), so the run raises kappa
-    tenfold and solves that step again, and goes on to time.end with every accepted state within GAP_LIMIT of
-    its element (without the raise it ends there with status contact). Stopped two steps later and resumed
-    from its checkpoint, it goes on with the raised penalty: the same states as the uninterrupted run."""
+    """The creasing layer with a penalty 100 times softer than the default (kappa = 10, the key's lowest): in
+    contact it overruns the penalty (0.14 of an element at its first contact, measured serially), so the run
+    raises kappa tenfold, solves that step again, and goes on to time.end with every accepted state within
+    GAP_LIMIT of its element (without the raise it ends there with status contact). Stopped two steps after
+    the raise and resumed from its checkpoint, it goes on with the raised penalty: the same raises and states
+    as the uninterrupted run, to 1e-12 (the resumed matrix starts without the nonzeros of the earlier
+    contact). Serial only: on 2 ranks two identical runs of this soft penalty differ by 6e-11 (Debian 13) and
+    the snap into the crease amplifies it (a resumed run's raise a step later, or an inverted element first);
+    the 2-rank checkpoint in contact is test_a_checkpoint_taken_in_contact_resumes_identically's."""
     from app.io import checkpoint
     from app.workflows.run import simulate
 
@@ -443,14 +449,16 @@ def test_a_soft_penalty_is_raised_until_it_holds_the_contact_and_a_resume_keeps_
     assert full["status"] == "buckled", full["message"]
     rows = _rows_of(base / "full")
     first = full["creases"]["first_contact"]
-    assert full["creases"]["stiffened"] == [{"time": first["time"], "contact_stiffness": 100.0}]
+    assert [r["contact_stiffness"] for r in full["creases"]["stiffened"]] == [100.0]
+    assert full["creases"]["stiffened"][0]["time"] >= first["time"]
     assert full["creases"]["contact_stiffness"] == 100.0
     assert max(float(r["penetration_mm"]) for r in rows) < GAP_LIMIT * element
-    stop = next(int(r["step"]) for r in rows if float(r["contact_length_mm"]) > 0) + 2
+    raised = full["creases"]["stiffened"][0]["time"]  # stopped two steps after the raise
+    stop = next(int(r["step"]) for r in rows if float(r["time"]) == raised) + 2
     assert stop + 2 <= full["steps"]
     part = base / "part"
     stopped = simulate(cfg, part, comm, progress=False, stop_after=stop)
     assert stopped["status"] == "interrupted"
     resumed = simulate(cfg, part, comm, progress=False, resume=checkpoint.check(part, cfg, comm))
-    _same_states(rows, _rows_of(part), rel=1e-12 if comm.size == 1 else 1e-10)
+    _same_states(rows, _rows_of(part), rel=1e-12)
     assert resumed["creases"]["stiffened"] == full["creases"]["stiffened"]
