@@ -340,9 +340,9 @@ class TimeStepper:
         dt = control.first_try(self.dt_next)
         last_reason, diagnosed, failures = None, False, 0
         limits = self.limits if self.minimizing else None  # on a branch: where it ends (app.onset.contact)
-        if limits is not None:
-            limits.new_step()
         checks = limits or self._contact_checks()  # a converged state's checks: on a branch, or with contact
+        if checks is not None:
+            checks.new_step()
         while True:
             dt = self._clip(dt, until)
             res, err = self.attempt(dt)
