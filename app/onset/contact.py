@@ -31,8 +31,7 @@ class Limit:
     detail: str
     consequence: str = "the model has no contact and no inverted elements, the branch cannot be followed further"
     overshoot: bool = False  # a converged state that a shorter step may avoid (the stepper retries it)
-    stiffen: bool = False  # a penetration that a stiffer penalty may hold
-    depth: float = 0.0  # that penetration, in elements
+    depth: float = 0.0  # a penetration that a stiffer penalty may hold, in elements (0: none)
     stiffened: bool = False  # the penalty was raised: the stepper solves the same step again
 
 
@@ -137,7 +136,7 @@ def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
             where = tuple(float(v) for v in pen.X[state.nodes[k]])
             return Limit("contact", where, f"the contact penalty is overrun near ({where[0]:.4g}, {where[1]:.4g}) mm:"
                                            f" penetration {depth[k]:.3g} of the element (limit {GAP_LIMIT:g})",
-                         stiffen=True, depth=float(depth[k]))
+                         depth=float(depth[k]))
     where = c.tunnelled_crossing(array)  # the penalty's own overlaps in contact, within its reach, are not
     if where is None:
         return None
@@ -210,7 +209,7 @@ class ModelLimits:
             return None
         if limit.overshoot and retry:
             return limit
-        if limit.stiffen:  # the penalty's own accuracy: raised until it holds the state, up to KAPPA_MAX
+        if limit.depth:  # the penalty's own accuracy: raised until it holds the state, up to KAPPA_MAX
             before, self._overrun = self._overrun, limit.depth
             old = self.p.contact.kappa
             if self._locked or (before is not None and limit.depth > LOCKED * before):
