@@ -220,7 +220,6 @@ class ModelLimits:
                 limit.detail += (f", not reduced by raising the penalty to {old:g}: the surface is locked "
                                  "through itself")
                 if retry:
-                    self._overrun = None
                     limit.overshoot = True
                     return limit
             elif self.p.contact.stiffen(t):

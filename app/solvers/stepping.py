@@ -212,7 +212,8 @@ class TimeStepper:
         self.solver.set_counters(old.counters())
         old.destroy()
         self.minimizing = True
-        self.limits = self._limits_of() if self._limits_of is not None else None
+        if self.limits is None and self._limits_of is not None:  # built already if contact was checked before
+            self.limits = self._limits_of()
 
     def relax(self) -> bool:
         """Minimize Pi at the current time from the current state, without advancing: a perturbed state settles

@@ -347,7 +347,7 @@ def _walk(difference, prev, origin: float, step: float, end: float):
     again, once, from its last positive load (or ``origin``) in SCAN_POINTS steps up to the last load the
     flat state was solved at; a crease onset lies below it or is not known (FlatFailed again)."""
     narrowed, k = None, 0
-    if (prev[0] if prev else origin) >= end:
+    if origin >= end:
         return None
     while True:
         k += 1
