@@ -3,8 +3,10 @@
 For each ratio, runs ``hydrobuckle run configs/bilayer-creases.toml --set material.film.modulus_ratio=R``
 (any further ``--set`` is passed on) into OUTDIR/ratio-R and prints one table row from its summary.json:
 the crease onset strain with its error bar, the depth of the crease at the onset, the linear (wrinkling)
-onset of the run and of the exact 1D reduction, and which comes first. A ratio whose run exists already
-(its summary.json) is read, not run again.
+onset of the run and of the exact 1D reduction, and which comes first: by least energy (the crease grown
+to its size of least energy against the wrinkles) and by nucleation (a crease small against the film has
+the film's own onset, the ratio-1 row's, against the exact wrinkling onset; docs/creases.md, "Nucleation
+or least energy"). A ratio whose run exists already (its summary.json) is read, not run again.
 
     python scripts/crease_ratio_study.py OUTDIR [R ...] [--set KEY=VALUE ...]
     (default ratios: 1 1.5 2 2.5 3 3.5 4 5; each run is serial, about 3-8 minutes)
@@ -19,7 +21,7 @@ CONFIG = Path(__file__).resolve().parent.parent / "configs" / "bilayer-creases.t
 RATIOS = ["1", "1.5", "2", "2.5", "3", "3.5", "4", "5"]
 
 
-def row(ratio: str, s: dict) -> str:
+def row(ratio: str, s: dict, nucleation: float | None) -> str:
     cr = s.get("creases", {})
     onset, cfg = cr.get("onset"), s["config"]
     strain, end = cfg["loading"]["compression_strain"], cfg["time"]["end"]
@@ -30,8 +32,9 @@ def row(ratio: str, s: dict) -> str:
     red = s.get("reduced") or {}
     # the compression ramp: applied strain = compression_strain * min(t / time.end, 1)
     exact = strain * min(red["time"] / end, 1.0) if red.get("time") is not None else None
+    by_nucleation = "-" if nucleation is None or exact is None else ("crease" if nucleation < exact else "wrinkle")
     cols = [ratio, crease, f"{depth:.4f}" if depth else "-", f"{linear:.4f}" if linear else "-",
-            f"{exact:.4f}" if exact else "-", str(cr.get("first"))]
+            f"{exact:.4f}" if exact else "-", str(cr.get("first")), by_nucleation]
     return "| " + " | ".join(cols) + " |"
 
 
@@ -43,8 +46,9 @@ def main(argv: list[str]) -> int:
     sets = rest[rest.index("--set"):] if "--set" in rest else []
     ratios = [r for r in rest[: len(rest) - len(sets)]] or RATIOS
     print("| modulus ratio | crease onset strain | crease depth at onset [mm] | wrinkling onset (2D) "
-          "| wrinkling onset (1D, exact) | first |")
-    print("|---|---|---|---|---|---|")
+          "| wrinkling onset (1D, exact) | first (least energy) | first (nucleation) |")
+    print("|---|---|---|---|---|---|---|")
+    nucleation = None  # the film's own crease onset: the homogeneous layer's (ratio 1), once run
     for ratio in ratios:
         out = outdir / f"ratio-{ratio}"
         if not (out / "summary.json").exists():
@@ -55,7 +59,10 @@ def main(argv: list[str]) -> int:
         if not (out / "summary.json").exists():
             print(f"| {ratio} | run failed: see {out} | | | | |")
             continue
-        print(row(ratio, json.loads((out / "summary.json").read_text())), flush=True)
+        summary = json.loads((out / "summary.json").read_text())
+        if float(ratio) == 1.0 and (summary.get("creases") or {}).get("onset"):
+            nucleation = summary["creases"]["onset"]["applied_strain"]
+        print(row(ratio, summary, nucleation), flush=True)
     return 0
 
 
