@@ -38,13 +38,21 @@ def main(argv: list[str]) -> int:
     if not argv or argv[0].startswith("-"):
         print(__doc__, file=sys.stderr)
         return 2
-    target = float(argv[0])
     rest = argv[1:]
     lo, hi = 1.0, 5.0
-    if "--range" in rest:
-        i = rest.index("--range")
-        lo, hi = float(rest[i + 1]), float(rest[i + 2])
-        rest = rest[:i] + rest[i + 3:]
+    try:
+        target = float(argv[0])
+        if "--range" in rest:
+            i = rest.index("--range")
+            lo, hi = float(rest[i + 1]), float(rest[i + 2])
+            rest = rest[:i] + rest[i + 3:]
+    except (ValueError, IndexError):
+        print("crease_nucleation: STRAIN and --range LO HI must be numbers", file=sys.stderr)
+        return 2
+    if not (0 < target < 1 and 0 < lo < hi):
+        print(f"crease_nucleation: STRAIN must lie in (0, 1) and 0 < LO < HI (got {target}, {lo}, {hi})",
+              file=sys.stderr)
+        return 2
     sets = [s for j, s in enumerate(rest) if j % 2 == 1 and rest[j - 1] == "--set"]
     f_lo, _, n_lo = wrinkling_strain(sets, lo)
     f_hi, _, n_hi = wrinkling_strain(sets, hi)
