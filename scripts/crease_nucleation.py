@@ -54,7 +54,13 @@ def main(argv: list[str]) -> int:
               file=sys.stderr)
         return 2
     sets = [s for j, s in enumerate(rest) if j % 2 == 1 and rest[j - 1] == "--set"]
-    f_lo, _, n_lo = wrinkling_strain(sets, lo)
+    from app.schema import ConfigError
+
+    try:
+        f_lo, _, n_lo = wrinkling_strain(sets, lo)
+    except ConfigError as err:
+        print(f"crease_nucleation: {err}", file=sys.stderr)
+        return 2
     f_hi, _, n_hi = wrinkling_strain(sets, hi)
     print(f"ratio {lo:.4f}: wrinkles at {f_lo:.5f} (N = {n_lo}); ratio {hi:.4f}: {f_hi:.5f} (N = {n_hi})",
           flush=True)
