@@ -18,9 +18,13 @@ from pathlib import Path
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "bilayer-creases.toml"
 
 
-def wrinkling_strain(sets: list[str], ratio: float) -> tuple[float, float, float]:
-    """The exact wrinkling onset's applied strain, its error bar, and the wrinkle count at ``ratio``
-    (``surface``: the short-wave limit, Biot's surface instability, comes first)."""
+class NoOnset(RuntimeError):
+    pass
+
+
+def wrinkling_strain(sets: list[str], ratio: float) -> tuple[float, str]:
+    """The exact wrinkling onset's applied strain and the wrinkle count at ``ratio`` (``surface``: the
+    short-wave limit, Biot's surface instability, comes first)."""
     from app import config
     from app.workflows import reduced
 
@@ -28,10 +32,10 @@ def wrinkling_strain(sets: list[str], ratio: float) -> tuple[float, float, float
                                     "reduced.horizon=0"])
     block = reduced.compute(cfg)
     if block["time"] is None:
-        raise RuntimeError(f"ratio {ratio}: no wrinkling onset up to time.end")
+        raise NoOnset(f"ratio {ratio}: no wrinkling onset up to time.end ({cfg['time']['end']} s)")
     scale = cfg["loading"]["compression_strain"] / cfg["time"]["end"]  # the ramp: strain = scale * t
     n = block["wrinkle_count"]
-    return scale * block["time"], scale * (block["time_error"] or 0.0), "surface" if n is None else f"{n:g}"
+    return scale * block["time"], "surface" if n is None else f"{n:g}"
 
 
 def main(argv: list[str]) -> int:
@@ -54,14 +58,22 @@ def main(argv: list[str]) -> int:
               file=sys.stderr)
         return 2
     sets = [s for j, s in enumerate(rest) if j % 2 == 1 and rest[j - 1] == "--set"]
+    from app.reduced.transient import TransientFailed
     from app.schema import ConfigError
 
     try:
-        f_lo, _, n_lo = wrinkling_strain(sets, lo)
+        return bisect(target, lo, hi, sets)
     except ConfigError as err:
         print(f"crease_nucleation: {err}", file=sys.stderr)
         return 2
-    f_hi, _, n_hi = wrinkling_strain(sets, hi)
+    except (NoOnset, TransientFailed) as err:
+        print(f"crease_nucleation: {err}", file=sys.stderr)
+        return 1
+
+
+def bisect(target: float, lo: float, hi: float, sets: list[str]) -> int:
+    f_lo, n_lo = wrinkling_strain(sets, lo)
+    f_hi, n_hi = wrinkling_strain(sets, hi)
     print(f"ratio {lo:.4f}: wrinkles at {f_lo:.5f} (N = {n_lo}); ratio {hi:.4f}: {f_hi:.5f} (N = {n_hi})",
           flush=True)
     if not (f_lo > target > f_hi):
@@ -69,7 +81,7 @@ def main(argv: list[str]) -> int:
         return 1
     while hi - lo > 0.005:
         mid = 0.5 * (lo + hi)
-        f, _, n = wrinkling_strain(sets, mid)
+        f, n = wrinkling_strain(sets, mid)
         print(f"ratio {mid:.4f}: wrinkles at {f:.5f} (N = {n})", flush=True)
         lo, hi = (mid, hi) if f > target else (lo, mid)
     print(f"the wrinkling onset equals {target} at a modulus ratio of {0.5 * (lo + hi):.3f} +- {0.5 * (hi - lo):.3f}")

@@ -57,7 +57,7 @@ def main(argv: list[str]) -> int:
                    "-o", str(out)]
             subprocess.run(cmd, check=False, stdout=subprocess.DEVNULL)
         if not (out / "summary.json").exists():
-            print(f"| {ratio} | run failed: see {out} | | | | |")
+            print(f"| {ratio} | run failed: see {out} | | | | | |")
             continue
         summary = json.loads((out / "summary.json").read_text())
         if float(ratio) == 1.0 and (summary.get("creases") or {}).get("onset"):
