@@ -25,7 +25,7 @@ class NoOnset(RuntimeError):
 def wrinkling_strain(sets: list[str], ratio: float) -> tuple[float, str]:
     """The exact wrinkling onset's applied strain and the wrinkle count at ``ratio`` (``surface``: the
     short-wave limit, Biot's surface instability, comes first)."""
-    from app import config
+    from app import config, factory
     from app.workflows import reduced
 
     cfg = config.load(str(CONFIG), [*sets, f"material.film.modulus_ratio={ratio!r}",
@@ -33,9 +33,8 @@ def wrinkling_strain(sets: list[str], ratio: float) -> tuple[float, str]:
     block = reduced.compute(cfg)
     if block["time"] is None:
         raise NoOnset(f"ratio {ratio}: no wrinkling onset up to time.end ({cfg['time']['end']} s)")
-    scale = cfg["loading"]["compression_strain"] / cfg["time"]["end"]  # the ramp: strain = scale * t
     n = block["wrinkle_count"]
-    return scale * block["time"], "surface" if n is None else f"{n:g}"
+    return factory.section(cfg).loading.applied_strain(block["time"]), "surface" if n is None else f"{n:g}"
 
 
 def main(argv: list[str]) -> int:
