@@ -151,10 +151,12 @@ class SelfContact:
         for i in np.flatnonzero(active.any(axis=1)):
             cand = np.flatnonzero(active[i])
             j = cand[np.argmax(g[i, cand])]  # the shallowest penetration: the nearest face
-            # a node over the joint of two segments of that face qualifies for both: always the first,
-            # so that the pairing does not flip between Newton iterates (the residual would not converge)
-            joint = [k for k in cand if k < j and set(self.segments[k]) & set(self.segments[j])]
-            j = min(joint) if joint else j
+            # a node over the joint of two segments of that face qualifies for both: always the later along the
+            # surface's direction (the one that starts where the other ends), so that the pairing does not flip
+            # between Newton iterates (the residual would not converge); a rule of the geometry, not of the
+            # segments' numbering, so that it picks alike on any number of ranks
+            after = [k for k in cand if self.segments[k, 0] == self.segments[j, 1]]
+            j = after[0] if after else j
             nodes.append(i)
             segs.append(j)
             gaps.append(g[i, j])
@@ -321,7 +323,11 @@ class SurfaceContact:
                 blk = blk[::-1]
             ends = [(int(gdofs[2 * k]), int(gdofs[2 * k + 1]), *points[k]) for k in blk]
             mine.append(ends)
-        segs = [s for part in p.comm.allgather(mine) for s in part]
+        # in an order of the reference geometry alone (each segment's midpoint, then its first end: a slit's two
+        # coincident faces run opposite ways), not of the ranks' facets, so that the nodes, and the zones that
+        # summary.json lists by their first node, come in the same order on any number of ranks and partition
+        segs = sorted((s for part in p.comm.allgather(mine) for s in part),
+                      key=lambda e: ((e[0][2] + e[1][2]) / 2, (e[0][3] + e[1][3]) / 2, e[0][2], e[0][3]))
         nodes: dict[int, int] = {}
         X, dofs, pairs = [], [], []
         for ends in segs:
