@@ -514,9 +514,11 @@ def test_a_soft_penalty_is_raised_until_it_holds_the_contact_and_a_resume_keeps_
     raises kappa tenfold, solves that step again, and goes on to time.end with every accepted state within
     GAP_LIMIT of its element (without the raise it ends there with status contact). Stopped two steps after
     the raise and resumed from its checkpoint, it goes on with the raised penalty: the same raises and states
-    as the uninterrupted run, to 1e-12 (the resumed matrix starts without the nonzeros of the earlier
-    contact). Serial only: on 2 ranks two identical runs of this soft penalty differ by 6e-11 (Debian 13) and
-    the snap into the crease amplifies it (a resumed run's raise a step later, or an inverted element first);
+    as the uninterrupted run, to 1e-9 (the resumed matrix starts without the nonzeros of the earlier
+    contact, so MUMPS' roundoff differs, and the snap into the crease grows it: measured below 1e-12 on Debian
+    12, 2e-10 on Debian 13, growth and penetration alike; a resume that lost the raise would differ by the
+    penalty's factor 10 in penetration). Serial only: on 2 ranks two identical runs of this soft penalty
+    differ by 6e-11 (Debian 13) and the snap into the crease amplifies it (a resumed run's raise a step later, or an inverted element first);
     the 2-rank checkpoint in contact is test_a_checkpoint_taken_in_contact_resumes_identically's."""
     from app.io import checkpoint
     from app.workflows.run import simulate
@@ -542,5 +544,5 @@ def test_a_soft_penalty_is_raised_until_it_holds_the_contact_and_a_resume_keeps_
     stopped = simulate(cfg, part, comm, progress=False, stop_after=stop)
     assert stopped["status"] == "interrupted"
     resumed = simulate(cfg, part, comm, progress=False, resume=checkpoint.check(part, cfg, comm))
-    _same_states(rows, _rows_of(part), rel=1e-12)
+    _same_states(rows, _rows_of(part), rel=1e-9)
     assert resumed["creases"]["stiffened"] == full["creases"]["stiffened"]
