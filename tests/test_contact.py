@@ -519,7 +519,8 @@ def test_a_soft_penalty_is_raised_until_it_holds_the_contact_and_a_resume_keeps_
     12, 2e-10 on Debian 13, growth and penetration alike; a resume that lost the raise would differ by the
     penalty's factor 10 in penetration). Serial only: on 2 ranks two identical runs of this soft penalty
     differ by 6e-11 (Debian 13) and the snap into the crease amplifies it (a resumed run's raise a step
-    later, or an inverted element first); the 2-rank checkpoint in contact is test_a_checkpoint_taken_in_contact_resumes_identically's."""
+    later, or an inverted element first); the 2-rank checkpoint in contact is
+    test_a_checkpoint_taken_in_contact_resumes_identically's."""
     from app.io import checkpoint
     from app.workflows.run import simulate
 
