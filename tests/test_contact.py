@@ -117,6 +117,14 @@ def test_the_pairs_near_enough_to_touch_are_those_of_a_check_of_every_pair():
             assert gap == g_all[i, cand].max() or pen.segments[j, 0] in pen.segments[cand, 1]
         paired += len(state.nodes)
     assert seen > 400 and paired > 300  # pairs checked (measured 456 and 427)
+    # the farthest a pair can lie from its segment's midpoint: behind a segment's widened end, at the reach
+    face = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [0.0, 1.0]])
+    far = SelfContact(face, np.array([[1, 0], [2, 1]]), stiffness=1.0)  # normals +y, node 3 a lone node
+    for s_end in (-OVERLAP * 0.99, 1.0 + OVERLAP * 0.99):
+        u = np.zeros_like(face)
+        u[3] = np.array([1.0 - s_end, -0.499]) - face[3]  # on segment (1, 0), 0.499 of its length behind it
+        state = far.pairs(u)
+        assert list(state.nodes) == [3] and state.gaps[0] == pytest.approx(-0.499, rel=1e-12)
 
 
 def test_segment_crossings_are_those_of_a_check_of_every_pair():
