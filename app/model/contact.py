@@ -169,8 +169,9 @@ class SelfContact:
         partner pairs near enough to touch, as (nodes, segments) arrays, NaN elsewhere: the candidates are
         the nodes within reach of a segment's midpoint (a k-d tree: every pair that can touch lies within
         half the segment's length, widened, plus the reach of it), an O(n log m) search instead of every
-        node against every segment (5x faster on the paper's bilayer's 320 surface nodes, where each Newton
-        iteration evaluates the term several times)."""
+        node against every segment (measured 1.3 against 6.3 ms on a folded face of 320 nodes, the size of
+        the paper's bilayer's surface at element 0.008 mm; each Newton iteration evaluates the term several
+        times)."""
         mid = a + 0.5 * t
         radius = float(np.max((0.5 + OVERLAP) * L + self.reach * self.seg_length)) * (1.0 + 1e-9)
         near = cKDTree(mid).query_ball_point(x, radius)
