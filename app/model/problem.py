@@ -208,10 +208,10 @@ class Problem:
             c = self.contact
             state = c.state(self.state.x.array)
             zones = c.penalty.zones(state)
-            deepest = _deepest(state.nodes, state.gaps, c.penalty.X) if len(state.nodes) else None
+            deepest = _deepest(state.points, state.gaps, c.penalty.Xp) if len(state.points) else None
             out["extra"] = {"contact_length_mm": c.penalty.contact_length(state), "creases": len(zones),
-                            "contact_x_mm": float(c.penalty.X[deepest, 0]) if deepest is not None else float("nan"),
-                            "contact_y_mm": float(c.penalty.X[deepest, 1]) if deepest is not None else float("nan"),
+                            "contact_x_mm": float(c.penalty.Xp[deepest, 0]) if deepest is not None else float("nan"),
+                            "contact_y_mm": float(c.penalty.Xp[deepest, 1]) if deepest is not None else float("nan"),
                             "penetration_mm": float(-state.gaps.min()) if len(state.gaps) else 0.0}
         return out
 
@@ -234,7 +234,7 @@ DEEPEST_TIE = 1e-6  # gaps within this fraction of the deepest are equally deep 
 
 
 def _deepest(nodes: np.ndarray, gaps: np.ndarray, X: np.ndarray) -> int:
-    """The node of the deepest contact: the least gap, and among gaps equal to it within DEEPEST_TIE (a crease's
+    """The contact point (node or segment midpoint, reference positions ``X``) of the deepest contact: the least gap, and among gaps equal to it within DEEPEST_TIE (a crease's
     two faces penetrate each other equally by symmetry, and roundoff would pick either) the first in reference
     x, then y, so that the history's contact place does not flip between runs that differ by roundoff."""
     g = gaps.min()

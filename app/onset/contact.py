@@ -100,7 +100,7 @@ class InversionCheck:
 def contact_summary(problem, rows: list[dict]) -> dict:
     """summary.json's ``creases`` block of a run with self-contact: the first state in contact (time, growth,
     applied strain, the deepest contact's reference place), the largest penetration of any recorded
-    state, and the zones of the last state (each: its nodes' reference x and y range and its length)."""
+    state, and the zones of the last state (each: its contact points' reference x and y range and its length)."""
     c = problem.contact
     touching = [r for r in rows if float(r.get("contact_length_mm") or 0.0) > 0.0]
     first = None
@@ -110,11 +110,11 @@ def contact_summary(problem, rows: list[dict]) -> dict:
                  "position_mm": [r["contact_x_mm"], r["contact_y_mm"]]}
     state = c.state(problem.state.x.array)
     zones = []
-    for nodes in c.penalty.zones(state):
-        X = c.penalty.X[nodes]
+    for points in c.penalty.zones(state):
+        X = c.penalty.Xp[points]
         zones.append({"x_mm": [float(X[:, 0].min()), float(X[:, 0].max())],
                       "y_mm": [float(X[:, 1].min()), float(X[:, 1].max())],
-                      "length_mm": float(np.sum(c.penalty.tributary[nodes]))})
+                      "length_mm": float(np.sum(c.penalty.share[points]))})
     raised = [{"time": t, "contact_stiffness": k} for t, k in c.raised]
     return {"contact": "penalty", "contact_stiffness": c.kappa, "stiffened": raised, "first_contact": first,
             "max_penetration_mm": max((float(r.get("penetration_mm") or 0.0) for r in rows), default=0.0),
@@ -129,11 +129,11 @@ def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
     c = problem.contact
     state = c.state(array)
     pen = c.penalty
-    if len(state.nodes):
-        depth = -state.gaps / pen.tributary[state.nodes]
+    if len(state.points):
+        depth = -state.gaps / pen.element[state.points]
         k = int(np.argmax(depth))
         if depth[k] > GAP_LIMIT:
-            where = tuple(float(v) for v in pen.X[state.nodes[k]])
+            where = tuple(float(v) for v in pen.Xp[state.points[k]])
             return Limit("contact", where, f"the contact penalty is overrun near ({where[0]:.4g}, {where[1]:.4g}) mm:"
                                            f" penetration {depth[k]:.3g} of the element (limit {GAP_LIMIT:g})",
                          depth=float(depth[k]))
