@@ -419,10 +419,26 @@ def _rows_of(path: Path) -> list[dict]:
     return read_csv(path / "history.csv")
 
 
+# the creasing layer's symmetry line, where its crease forms. The crease's two faces are mirror images, each
+# node across a joint of the other face, on the joint's bisector, where the contact energy (a point's distance
+# to the face) has its kink: the symmetric state is no minimizer, and the faces slide by a fraction of the
+# penetration to one side (the deepest gaps 4.06e-5 and 3.31e-5 mm at the end, on 0.01 mm elements), the side
+# roundoff's choice: a serial and a 2-rank run, or two 2-rank runs (MUMPS' parallel roundoff), end in mirror
+# images of each other, every other column equal to 6e-11 (measured). The contact place is compared up to
+# that mirror (docs/creases.md, "What is not built yet").
+MIRROR = CREASING["geometry"]["length"] / 2
+
+
+def _mirrored(a: float, b: float) -> float:
+    """The distance of contact places a and b [mm], or of a and b's mirror image, whichever is less."""
+    return min(abs(a - b), abs(a + b - 2 * MIRROR))
+
+
 def _same_states(ref: list[dict], got: list[dict], rel: float) -> float:
     """The same steps and every column within ``rel`` but Newton's iteration count (near contact the
     backtracking's path depends on roundoff: measured 6 vs 7, 18 vs 7 iterations to the same state); the
-    amplitude, penetration and contact place against their column's scale. Returns the worst difference."""
+    amplitude, penetration and contact place against their column's scale, the contact place up to the
+    crease's mirror image (MIRROR). Returns the worst difference."""
     assert len(got) == len(ref) and list(got[0]) == list(ref[0])
     scale = {k: max(abs(float(r[k])) for r in ref if r[k] != "" and np.isfinite(float(r[k])))
              for k in ("amplitude_mm", "penetration_mm", "contact_x_mm", "contact_y_mm")}
@@ -434,16 +450,30 @@ def _same_states(ref: list[dict], got: list[dict], rel: float) -> float:
             x, y = float(a[k]), float(b[k])
             if np.isnan(x) and np.isnan(y):
                 continue
-            d = abs(x - y) / (scale[k] if k in scale else max(abs(x), abs(y)))
+            d = (_mirrored(x, y) if k == "contact_x_mm" else abs(x - y)) / (scale[k] if k in scale
+                                                                             else max(abs(x), abs(y)))
             worst = max(worst, d)
             assert d <= rel, (k, a["step"], a[k], b[k])
     return worst
 
 
+def _same_creases(got: dict, ref: dict, rel: float) -> None:
+    """summary.json's creases blocks alike: the zones (symmetric about the crease) and the first contact, its
+    place up to the crease's mirror image."""
+    assert len(got["zones"]) == len(ref["zones"])
+    for za, zb in zip(got["zones"], ref["zones"]):
+        assert all(za[k] == pytest.approx(zb[k], rel=rel) for k in ("x_mm", "y_mm", "length_mm"))
+    a, b = dict(got["first_contact"]), dict(ref["first_contact"])
+    (xa, ya), (xb, yb) = a.pop("position_mm"), b.pop("position_mm")
+    assert a == pytest.approx(b, rel=rel) and ya == pytest.approx(yb, rel=rel)
+    assert _mirrored(xa, xb) <= rel * abs(xb)
+
+
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run in contact with a serial one")
 def test_a_branch_in_contact_is_the_same_on_1_and_2_ranks(tmp_path):
     """The creasing layer's branch in contact on 2 ranks against the same run on one (every rank alone):
-    the same steps, and every column, contact ones included, within 1e-8."""
+    the same steps, and every column, contact ones included, within 1e-8 (the contact place up to the
+    crease's mirror image: MIRROR)."""
     from app.workflows.run import simulate
 
     comm = MPI.COMM_WORLD
@@ -455,8 +485,7 @@ def test_a_branch_in_contact_is_the_same_on_1_and_2_ranks(tmp_path):
     a, b = _rows_of(tmp_path / f"serial{comm.rank}"), _rows_of(base / "dist")
     assert any(float(r["contact_length_mm"]) > 0 for r in a)
     _same_states(a, b, rel=1e-8)
-    for key in ("first_contact", "zones"):
-        assert dist["creases"][key] == pytest.approx(serial["creases"][key], rel=1e-8)
+    _same_creases(dist["creases"], serial["creases"], rel=1e-8)
 
 
 def test_the_contact_surface_is_numbered_alike_on_any_number_of_ranks():
@@ -503,8 +532,7 @@ def test_a_checkpoint_taken_in_contact_resumes_identically(tmp_path):
     rel = 1e-12 if comm.size == 1 else 1e-10
     _same_states(rows, _rows_of(part), rel=rel)
     assert resumed["status"] == full["status"]
-    for key in ("first_contact", "zones"):
-        assert resumed["creases"][key] == pytest.approx(full["creases"][key], rel=rel)
+    _same_creases(resumed["creases"], full["creases"], rel=rel)
     assert resumed["creases"]["max_penetration_mm"] == pytest.approx(full["creases"]["max_penetration_mm"],
                                                                       rel=1e-9)
 
