@@ -193,7 +193,7 @@ class SelfContact:
         """The active pairs of displacement ``u`` (n, 2): each point with the segment or concave joint it has
         passed through least deeply (none if it is behind none within the reach)."""
         x = self.X + u
-        xp = 0.5 * (x[self.ends[:, 0]] + x[self.ends[:, 1]])
+        xp = self.points(u)
         a, b = x[self.segments[:, 0]], x[self.segments[:, 1]]
         t = b - a
         L = np.linalg.norm(t, axis=1)
@@ -300,7 +300,7 @@ class SelfContact:
         component c; empty without ``hessian``) at displacement ``u``."""
         state = self.pairs(u)
         x = self.X + u
-        xp = 0.5 * (x[self.ends[:, 0]] + x[self.ends[:, 1]])
+        xp = self.points(u)
         grad = np.zeros(2 * len(self.X))
         blocks = []
         k = self.k
