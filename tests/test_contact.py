@@ -49,15 +49,22 @@ def test_the_gap_and_the_penalty_have_their_finite_difference_derivatives():
     assert len(pen.pairs(u).points) >= 8 and e > 0
     H = _dense(blocks, u.size)
     assert np.array_equal(H, H.T)
+    fd, fdH = _central_differences(pen, u, eps)
+    assert np.abs(fd - grad.reshape(-1)).max() < 1e-6 * np.abs(grad).max()
+    assert np.abs(fdH - H).max() < 1e-5 * np.abs(H).max()
+    # the reference state touches nothing (the arms face each other at a distance)
+    assert pen.energy(np.zeros_like(X)) == 0.0
+
+
+def _central_differences(pen: SelfContact, u: np.ndarray, eps: float):
+    """The penalty's gradient (from its energy) and Hessian (from its gradient) by central differences of step
+    ``eps`` in every displacement component of ``u``."""
     flat = u.reshape(-1)
     fd = np.array([(pen.energy((flat + eps * v).reshape(-1, 2)) - pen.energy((flat - eps * v).reshape(-1, 2)))
                    / (2 * eps) for v in np.eye(u.size)])
     fdH = np.array([(pen.derivatives((flat + eps * v).reshape(-1, 2))[1] - pen.derivatives((flat - eps * v)
                      .reshape(-1, 2))[1]).reshape(-1) / (2 * eps) for v in np.eye(u.size)])
-    assert np.abs(fd - grad.reshape(-1)).max() < 1e-6 * np.abs(grad).max()
-    assert np.abs(fdH - H).max() < 1e-5 * np.abs(H).max()
-    # the reference state touches nothing (the arms face each other at a distance)
-    assert pen.energy(np.zeros_like(X)) == 0.0
+    return fd, fdH
 
 
 def _dense(blocks: list, size: int) -> np.ndarray:
@@ -149,11 +156,7 @@ def test_a_point_behind_a_concave_joint_has_the_finite_difference_derivatives():
     assert len(state.points) == 3 and state.at_joint.all()
     e, grad, blocks = pen.derivatives(u)
     H = _dense(blocks, u.size)
-    flat, eps = u.reshape(-1), 1e-7
-    fd = np.array([(pen.energy((flat + eps * v).reshape(-1, 2)) - pen.energy((flat - eps * v).reshape(-1, 2)))
-                   / (2 * eps) for v in np.eye(u.size)])
-    fdH = np.array([(pen.derivatives((flat + eps * v).reshape(-1, 2))[1] - pen.derivatives((flat - eps * v)
-                     .reshape(-1, 2))[1]).reshape(-1) / (2 * eps) for v in np.eye(u.size)])
+    fd, fdH = _central_differences(pen, u, 1e-7)
     assert np.abs(fd - grad.reshape(-1)).max() < 1e-7 * np.abs(grad).max()
     assert np.abs(fdH - H).max() < 1e-6 * np.abs(H).max()
     assert np.abs(grad.sum(axis=0)).max() < 1e-12 * np.abs(grad).max()  # pair forces: no net force
