@@ -697,6 +697,44 @@ def test_a_minimizing_step_that_ends_uphill_is_rejected(monkeypatch, tmp_path):
     assert s["final"]["time"] == pytest.approx(1.0)
 
 
+def test_a_branch_step_whose_extrapolated_start_inverts_a_cell_starts_from_the_last_state(monkeypatch, tmp_path):
+    """Past a snap the last step's displacement rate, extrapolated, can carry the minimizer's initial guess outside
+    its energy's domain (an inverted cell: ln J undefined). Started there, every trial of its backtracking line
+    search is outside too and the first is taken: the iterates wander outside, and the step ends with an inverted
+    element (measured on the stiff film's first fold, docs/creases.md). Here the first branch step's prediction is
+    made to invert a cell: the stepper sees it, starts that step from the last state instead (counted in
+    postbuckling.minimizer.inadmissible_predictions), and the run is the undisturbed one: no failed solve more, the
+    same states to the Newton tolerance."""
+    from app.solvers.stepping import TimeStepper
+
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    plain = simulate(_compression(), base / "plain", comm, progress=False)
+    predict = TimeStepper._predict
+    state = {"done": False, "outside": None}
+
+    def inverting(self, dt, extrapolate=True):
+        dQ = predict(self, dt, extrapolate)
+        if self.minimizing and extrapolate and not state["done"]:
+            state["done"] = True
+            w, u = self.system.w.x.array, np.asarray(self.system.u_dofs)
+            free = np.setdiff1d(u[u < compat.function_vector(self.system.w).getLocalSize()], self.solver._bc_dofs)
+            w[free[::97]] += 10.0 * FILM  # some nodes moved by ten films, far past their neighbours: cells invert
+            state["outside"] = not self.solver.admissible()
+        return dQ
+
+    monkeypatch.setattr(TimeStepper, "_predict", inverting)
+    s = simulate(_compression(), base / "out", comm, progress=False)
+    assert state["done"] and state["outside"] is True
+    assert s["status"] == "buckled" and s["final"]["time"] == pytest.approx(1.0)
+    assert s["postbuckling"]["minimizer"]["inadmissible_predictions"] == 1
+    assert plain["postbuckling"]["minimizer"]["inadmissible_predictions"] == 0
+    assert s["failed_solves"] == plain["failed_solves"] and s["steps"] == plain["steps"]
+    a, b = _rows(base / "plain"), _rows(base / "out")
+    for ra, rb in zip(a, b):
+        assert float(rb["growth_mm"]) == pytest.approx(float(ra["growth_mm"]), rel=1e-6, abs=1e-12)
+
+
 # a 4-wavelength strip of the paper's bilayer (element 0.008 mm, 4 film layers): its branch loses stability
 # again at 12.78 um (the full 2 mm bilayer on this mesh: 12.83 um, above), then folds
 STRIP = PERIOD_DOUBLING + ["geometry.length=0.4444"]

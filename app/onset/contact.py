@@ -35,6 +35,7 @@ class Limit:
     stiffened: bool = False  # the penalty was raised: the stepper solves the same step again
 
 
+INVERTED = "the model has no inverted elements, the branch cannot be followed further"
 OVERRUN = "the contact penalty cannot hold this state, the branch cannot be followed further"
 # an overrun that a tenfold stiffer penalty reduced by less than this factor is not the penalty's softness
 LOCKED = 0.5
@@ -94,7 +95,10 @@ class InversionCheck:
             self._mid = self.V0.tabulate_dof_coordinates()[:, :2]
         mine = tuple(float(v) for v in self._mid[i]) if n_owned and local == jmin else None
         where = next(w for w in p.comm.allgather(mine) if w is not None)
-        return Limit("inverted", where, f"an element inverts (det F = {jmin:.3g}) at ({where[0]:.4g}, {where[1]:.4g}) mm")
+        detail = f"an element inverts (det F = {jmin:.3g}) at ({where[0]:.4g}, {where[1]:.4g}) mm"
+        if p.contact is not None:  # with self-contact on, only the inversion is beyond the model
+            return Limit("inverted", where, detail, INVERTED)
+        return Limit("inverted", where, detail)
 
 
 def contact_summary(problem, rows: list[dict]) -> dict:
@@ -136,7 +140,7 @@ def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
             where = tuple(float(v) for v in pen.Xp[state.points[k]])
             return Limit("contact", where, f"the contact penalty is overrun near ({where[0]:.4g}, {where[1]:.4g}) mm:"
                                            f" penetration {depth[k]:.3g} of the element (limit {GAP_LIMIT:g})",
-                         depth=float(depth[k]))
+                         OVERRUN, depth=float(depth[k]))
     where = c.tunnelled_crossing(array)  # the penalty's own overlaps in contact, within its reach, are not
     if where is None:
         return None

@@ -245,7 +245,8 @@ class OnsetTracker:
             "branch_crossings": [x.as_dict() for x in self.crossings[1:]],
             "restabilized": list(self.restabilized),
             "minimizer": {k: solver.get(k, 0) for k in ("shifted_factorizations", "saddles", "polishes", "escapes")}
-            | {"energy_rejections": st.energy_rejections}}}
+            | {"energy_rejections": st.energy_rejections,
+               "inadmissible_predictions": st.inadmissible_predictions}}}
 
     def criterion_summary(self) -> dict:
         return self.settings.rule.summary(self.settings.params)

@@ -37,7 +37,11 @@ from app.solvers.newton import NewtonResult, NewtonSolver, SolverSettings
 
 SHIFT_START = 1e-6  # first trial shift (times |diag K|) of a factorization with negative pivots
 SHIFT_MAX = 1e6  # beyond this the direction is a scaled gradient step already
-OUTSIDE = 1e300  # the objective outside Pi's domain (see MinimizingNewton._objective)
+# the objective outside Pi's domain (see MinimizingNewton._objective): far above any energy of a step, and far
+# below overflow: PETSc's backtracking fits a cubic through two such values divided by squares of step lengths
+# down to 1e-12; at 1e300 that fit overflowed, its step length became NaN, no NaN compares below the minimum
+# step, and the search ended after its last trial without a failure (measured on a fold of the stiff film)
+OUTSIDE = 1e20
 ITERATION_FACTOR = 4  # escaping a saddle may take more iterations than an ordinary step
 ESCAPES = 3  # negative-curvature steps per solve (MinimizingNewton._escape)
 INVERSE_ITERATIONS = 30  # inverse iterations with the shifted factor for a direction of negative curvature
@@ -91,6 +95,17 @@ class MinimizingNewton(NewtonSolver):
                 return self.energy(x.array_r)
             value = compat.assemble_scalar(self.energy_form, self.comm) + self.extra.objective(x.array_r)
             return value if math.isfinite(value) else OUTSIDE
+
+    def admissible(self) -> bool:
+        """Whether ``w`` (its Dirichlet values set) lies in Pi's domain: the objective there is finite (no
+        inverted cell; with contact, no node tunnelled through the surface). Same answer on every rank."""
+        x = compat.function_vector(self.w)
+        compat.set_dirichlet_values(x, self.bcs)
+        x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        value = compat.assemble_scalar(self.energy_form, self.comm)
+        if self.extra is not None:
+            value += self.extra.objective(x.array_r)
+        return math.isfinite(value)
 
     def energy(self, owned_values=None) -> float:
         """Pi at ``w`` (or at the owned values given, already in ``w``): the energy form plus the extra
@@ -159,6 +174,12 @@ class MinimizingNewton(NewtonSolver):
         compat.set_dirichlet_values(x, self.bcs)
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         self.last.energy_start = self.energy(x.array)
+        if not self.admissible():
+            # a start outside Pi's domain: every trial of the line search is OUTSIDE there too, and the
+            # backtracking's test (not above the start) takes the first one: the iterates would wander
+            # outside. No iteration: the caller starts from elsewhere or cuts the step
+            self.last_iterations = 0
+            return NewtonResult(False, 0, int(PETSc.SNES.ConvergedReason.DIVERGED_FUNCTION_DOMAIN), float("nan"))
         res = super().solve()
         reason = PETSc.SNES.ConvergedReason
         if not res.converged and res.reason == reason.DIVERGED_LINE_SEARCH:

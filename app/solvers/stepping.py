@@ -194,6 +194,7 @@ class TimeStepper:
         self.minimizing = False  # past an onset with stability.after_onset = "branch": follow_minimizers
         self.escape_length = None  # the minimizer's negative-curvature step [mm] (the branch's imperfection)
         self.energy_rejections = 0  # minimizer solves whose energy ended above the initial guess's
+        self.inadmissible_predictions = 0  # minimizer steps whose extrapolated start lay outside the energy's domain
         self._limits_of = limits
         self.limits = None  # built once minimizing
         self.check = check
@@ -280,7 +281,8 @@ class TimeStepper:
         (:mod:`app.io.checkpoint`): the summary's counters, the equilibrium test's volumes, Newton's scale."""
         return {"rejected": self.rejected, "failed_solves": self.failed_solves, "volume": self._volume,
                 "volume0": self._volume0, "uptake_rate": self.uptake_rate, "newton": self.solver.counters(),
-                "minimizing": self.minimizing, "energy_rejections": self.energy_rejections}
+                "minimizing": self.minimizing, "energy_rejections": self.energy_rejections,
+                "inadmissible_predictions": self.inadmissible_predictions}
 
     def set_counters(self, c: dict) -> None:
         self.rejected, self.failed_solves = c["rejected"], c["failed_solves"]
@@ -289,6 +291,7 @@ class TimeStepper:
         if c.get("minimizing"):
             self.follow_minimizers()
         self.energy_rejections = c.get("energy_rejections", 0)
+        self.inadmissible_predictions = c.get("inadmissible_predictions", 0)
         self.solver.set_counters(c["newton"])
 
     # --- one step --------------------------------------------------------------------------
@@ -304,15 +307,16 @@ class TimeStepper:
                 break
         return dt
 
-    def _predict(self, dt: float) -> np.ndarray:
-        """Set the unknown to the predictor; return the predicted flux increment."""
+    def _predict(self, dt: float, extrapolate: bool = True) -> np.ndarray:
+        """Set the unknown to the predictor (the displacement extrapolated from the last step unless not
+        ``extrapolate``); return the predicted flux increment."""
         s = self.system
         r = dt / self.dt_prev if self.history_valid else 0.0
         u_n = s.state.x.array[s.u_dofs]
         dQ_pred = r * self.dQ_prev
         w = s.w.x.array
         w[:] = 0.0
-        w[s.u_dofs] = u_n + r * self.rate_u
+        w[s.u_dofs] = u_n + (r if extrapolate else 0.0) * self.rate_u
         w[s.q_dofs] = dQ_pred
         return dQ_pred
 
@@ -320,6 +324,11 @@ class TimeStepper:
         """Solve one step of size dt from the current state; returns (newton result, err)."""
         self.system.set_time(self.t + dt, dt)
         dQ_pred = self._predict(dt)
+        if self.minimizing and not self.solver.admissible():
+            # past a snap the last step's displacement rate, extrapolated, can invert cells (or carry a node
+            # through the surface): the minimizer cannot start outside its energy's domain; the last state can
+            self.inadmissible_predictions += 1
+            dQ_pred = self._predict(dt, extrapolate=False)
         res = self.solver.solve()
         if res.converged and self.minimizing:
             from app.solvers.minimizer import energy_decreased
