@@ -38,9 +38,9 @@ from app.solvers.newton import NewtonResult, NewtonSolver, SolverSettings
 SHIFT_START = 1e-6  # first trial shift (times |diag K|) of a factorization with negative pivots
 SHIFT_MAX = 1e6  # beyond this the direction is a scaled gradient step already
 # the objective outside Pi's domain (see MinimizingNewton._objective): far above any energy of a step, and far
-# below overflow: PETSc's backtracking fits a cubic through two such values divided by squares of step lengths
-# down to 1e-12; at 1e300 that fit overflowed, its step length became NaN, no NaN compares below the minimum
-# step, and the search ended after its last trial without a failure (measured on a fold of the stiff film)
+# below overflow: PETSc's backtracking (bt) fits a cubic through two such values divided by squares of step
+# lengths down to 1e-12. At 1e300 (until 2026-12-05) that fit overflows: its formula, replayed with two trials
+# outside, gives a NaN step length after three cuts, and a NaN never compares below the minimum step
 OUTSIDE = 1e20
 ITERATION_FACTOR = 4  # escaping a saddle may take more iterations than an ordinary step
 ESCAPES = 3  # negative-curvature steps per solve (MinimizingNewton._escape)
