@@ -95,10 +95,9 @@ class InversionCheck:
             self._mid = self.V0.tabulate_dof_coordinates()[:, :2]
         mine = tuple(float(v) for v in self._mid[i]) if n_owned and local == jmin else None
         where = next(w for w in p.comm.allgather(mine) if w is not None)
-        detail = f"an element inverts (det F = {jmin:.3g}) at ({where[0]:.4g}, {where[1]:.4g}) mm"
-        if p.contact is not None:  # with self-contact on, only the inversion is beyond the model
-            return Limit("inverted", where, detail, INVERTED)
-        return Limit("inverted", where, detail)
+        # with self-contact on, only the inversion is beyond the model
+        return Limit("inverted", where, f"an element inverts (det F = {jmin:.3g}) at ({where[0]:.4g}, {where[1]:.4g}) mm",
+                     INVERTED if p.contact is not None else Limit.consequence)
 
 
 def contact_summary(problem, rows: list[dict]) -> dict:

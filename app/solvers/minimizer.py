@@ -102,10 +102,8 @@ class MinimizingNewton(NewtonSolver):
         x = compat.function_vector(self.w)
         compat.set_dirichlet_values(x, self.bcs)
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-        value = compat.assemble_scalar(self.energy_form, self.comm)
-        if self.extra is not None:
-            value += self.extra.objective(x.array_r)
-        return math.isfinite(value)
+        value = self._objective(self.snes, x)  # NaN (no contact term) or OUTSIDE outside the domain
+        return math.isfinite(value) and value < OUTSIDE
 
     def energy(self, owned_values=None) -> float:
         """Pi at ``w`` (or at the owned values given, already in ``w``): the energy form plus the extra
