@@ -102,7 +102,14 @@ def _share() -> tuple[int, int] | None:
 def pytest_collection_modifyitems(config, items):
     """With HYDROBUCKLE_TEST_SHARE=k/n (.ci/run: Debian 12 1/2, Debian 13 2/2, in both the serial and the
     2-rank session), each test of tests/data/long-tests.txt (with the tests that share its module
-    fixtures) runs in one share only; every other test runs in every share. The same on every rank."""
+    fixtures) runs in one share only; every other test runs in every share. The same on every rank.
+
+    The same tests are marked ``long``: the quick lane (``bash scripts/test.sh --quick``) deselects them
+    with ``-m "not long"``."""
+    long_ids = long_test_shares(items, 1, listed_seconds())
+    for item in items:
+        if item.nodeid in long_ids:
+            item.add_marker(pytest.mark.long)
     share = _share()
     if share is None:
         return

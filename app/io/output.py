@@ -44,12 +44,12 @@ def versions() -> dict:
     from petsc4py import PETSc
     from slepc4py import SLEPc
 
-    import app
+    from app.version import __version__
 
     def v(mod):
         return ".".join(str(x) for x in mod.Sys.getVersion())
 
-    return {"hydrobuckle": app.__version__, "dolfinx": dolfinx.__version__, "petsc": v(PETSc),
+    return {"hydrobuckle": __version__, "dolfinx": dolfinx.__version__, "petsc": v(PETSc),
             "slepc": v(SLEPc), "gmsh": gmsh.__version__}
 
 

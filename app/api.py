@@ -1,0 +1,318 @@
+"""hydrobuckle's Python API: build a config, run a case, the exact 1D reduction, a study; read the answers.
+
+Every function here does what the command of the same name does (``hydrobuckle run``, ``reduced``,
+``study``, ``sweep``), with the same checks, files and summary, and returns the answer as an object::
+
+    import app as hb
+
+    cfg = hb.load_config("configs/bilayer.toml", {"mesh.element_size": 0.008})
+    result = hb.run(cfg, "results/coarse")
+    print(result.g_c_um, result.g_c_error_um, result.N_c)
+
+Bad input raises :class:`ConfigError` (its message is the CLI's one line) before any result directory is
+made; a run whose solver fails returns a :class:`Result` with ``status == "failed"`` and everything it
+computed, as the CLI does (exit code 1 there).
+
+Under MPI, call the same functions on every rank of the communicator (``comm``, default
+``MPI.COMM_WORLD``): each rank returns the same :class:`Result`.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from app import config
+from app.schema import ConfigError
+
+__all__ = ["ConfigError", "Result", "Study", "load_config", "load_result", "reduced", "run", "studies", "study",
+           "sweep"]
+
+Overrides = Mapping[str, Any] | Sequence[str] | None
+
+
+def _override_list(overrides: Overrides) -> list[str]:
+    """``{"mesh.element_size": 0.008}`` or ``["mesh.element_size=0.008"]`` as the CLI's ``--set`` items."""
+    if overrides is None:
+        return []
+    if isinstance(overrides, Mapping):
+        return [f"{k}={config.toml_value(v)}" for k, v in overrides.items()]
+    return [str(item) for item in overrides]
+
+
+def load_config(path: str | Path | None = None, overrides: Overrides = None) -> dict:
+    """A resolved, validated config: the TOML file at ``path`` (None: every key at its default) with
+    ``overrides`` applied, as ``--set`` does (a mapping of dotted keys to values, or ``"KEY=VALUE"``
+    strings). Every key of the schema is present in the result (the reference's Configuration page lists
+    them). Raises :class:`ConfigError` naming the key for an unknown key, a wrong type or a value out of
+    range."""
+    if path is None:
+        return config.resolve({}, _override_list(overrides))
+    return config.load(path, _override_list(overrides))
+
+
+def _comm(comm):
+    if comm is None:
+        from mpi4py import MPI
+
+        return MPI.COMM_WORLD
+    return comm
+
+
+def _logging(comm, verbose: bool) -> None:
+    from app import logging_setup
+
+    logging_setup.setup(comm, logging.INFO if verbose else logging.WARNING)
+
+
+def _read_csv(path: Path) -> dict[str, Any]:
+    """A CSV file's columns by name: numeric columns as float arrays (empty cells NaN), others as lists."""
+    import numpy as np
+
+    if not path.is_file():
+        return {}
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows:
+        return {}
+    header, body = rows[0], rows[1:]
+    columns: dict[str, Any] = {}
+    for j, name in enumerate(header):
+        cells = [r[j] if j < len(r) else "" for r in body]
+        try:
+            columns[name] = np.array([float(c) if c != "" else np.nan for c in cells])
+        except ValueError:
+            columns[name] = cells
+    return columns
+
+
+@dataclass(frozen=True)
+class Result:
+    """What a run (or the 1D reduction) wrote into its result directory, read back.
+
+    ``g_c_um`` is the critical growth in micrometres (None when the run found no onset), ``g_c_error_um``
+    its estimated discretization error (the companion runs of ``stability.error_estimate``, or the 1D
+    reduction's three levels), ``N_c`` the wrinkle count. ``summary`` is summary.json as a dict, ``history``
+    history.csv's columns (numeric ones as numpy arrays), ``files`` every file of the directory by name."""
+
+    outdir: Path
+    summary: dict = field(repr=False)
+    history: dict = field(repr=False)
+
+    @classmethod
+    def load(cls, outdir: str | Path) -> Result:
+        """The result in ``outdir`` (a directory written by ``run``, ``reduced`` or their commands)."""
+        outdir = Path(outdir)
+        path = outdir / "summary.json"
+        if not path.is_file():
+            raise FileNotFoundError(f"{outdir} has no summary.json: not a finished hydrobuckle result")
+        return cls(outdir, json.loads(path.read_text()), _read_csv(outdir / "history.csv"))
+
+    # -- the answer -------------------------------------------------------------------------------------
+    @property
+    def status(self) -> str:
+        """``buckled``, ``stable``, ``equilibrium``, ``failed``, ``interrupted``, or a postbuckling end."""
+        return self.summary["status"]
+
+    @property
+    def solver(self) -> str:
+        """``2d`` for a FEniCSx run, ``reduced-1d`` for the exact 1D reduction."""
+        return self.summary.get("solver", "2d")
+
+    @property
+    def _onset(self) -> dict:
+        if self.solver == "reduced-1d":
+            return self.summary.get("reduced") or {}
+        return self.summary.get("critical") or {}
+
+    @property
+    def g_c_um(self) -> float | None:
+        """The critical growth g_c [um]: the increase of thickness when the film wrinkles."""
+        return self._onset.get("growth_um")
+
+    @property
+    def g_c_error_um(self) -> float | None:
+        """g_c's estimated discretization error [um] (None when not estimated)."""
+        if self.solver == "reduced-1d":
+            return self._onset.get("growth_error_um")
+        return (self._onset.get("discretization_error") or {}).get("total_um")
+
+    @property
+    def N_c(self) -> float | None:  # noqa: N802 - the paper's name
+        """The critical wrinkle count (wavelengths along the surface, to half a wave)."""
+        return self._onset.get("wrinkle_count")
+
+    @property
+    def critical_time(self) -> float | None:
+        """The time of the onset [s]."""
+        return self._onset.get("time")
+
+    @property
+    def reduced(self) -> Result | None:
+        """The exact 1D counterpart reported beside a 2D run (``reduced.beside_2d``), as a result of its
+        own (no directory of its own: ``outdir`` is the run's, ``history`` empty); None when not computed."""
+        block = self.summary.get("reduced")
+        if self.solver == "reduced-1d" or not isinstance(block, dict) or "growth_um" not in block:
+            return None
+        status = "buckled" if block.get("kind") != "stable" else "stable"
+        return Result(self.outdir, {"status": status, "solver": "reduced-1d", "reduced": block}, {})
+
+    @property
+    def files(self) -> dict[str, Path]:
+        """Every file the result directory holds, by name (``summary.json``, ``history.csv``, ``fields.xdmf``,
+        ``mode.png``, ...)."""
+        return {p.name: p for p in sorted(self.outdir.iterdir()) if p.is_file() and not p.name.startswith(".")}
+
+    def __str__(self) -> str:
+        if self.g_c_um is None:
+            return f"{self.status} ({self.outdir})"
+        err = f" +- {self.g_c_error_um:.4f} um" if self.g_c_error_um is not None else ""
+        n = f", N_c = {self.N_c:g}" if self.N_c is not None else ""
+        return f"g_c = {self.g_c_um:.4f} um{err}{n} ({self.status}, {self.outdir})"
+
+
+def load_result(outdir: str | Path) -> Result:
+    """The result a finished run, or ``hydrobuckle run``, wrote into ``outdir``."""
+    return Result.load(outdir)
+
+
+def run(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False, force: bool = False) -> Result:
+    """Run one case as ``hydrobuckle run`` does: the pre-flight checks (mesh size, input files, the result
+    directory), the simulation to its onset (or past it, as the config says), its error estimate and its
+    exact 1D counterpart where the config asks for them; everything written into ``outdir``.
+
+    ``cfg``: a resolved config (:func:`load_config`). ``comm``: the communicator to run on (default
+    ``MPI.COMM_WORLD``). ``verbose``: the progress lines (one per step) on rank 0. ``force``: accept a mesh
+    above the size limit. Raises :class:`ConfigError` for bad input (nothing written)."""
+    from app.io import lock
+    from app.workflows import preflight
+    from app.workflows.pipeline import run_case
+
+    comm = _comm(comm)
+    cfg = config.resolve(cfg)  # validated again: a dict edited by hand is checked like a file
+    outdir = Path(outdir)
+    try:
+        preflight.check([cfg], comm, outdir, force=force)
+        _logging(comm, verbose)
+        run_case(cfg, outdir, comm, progress=verbose)
+    finally:
+        lock.release_all()
+    comm.barrier()
+    return Result.load(outdir)
+
+
+def reduced(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False) -> Result:
+    """The exact 1D reduction of a bilayer or circular tube, as ``hydrobuckle reduced``: g_c and N_c
+    converged in 1D mesh and time with an error bar, the margin curve (``margin.csv``) in ``outdir``.
+    Rank 0 computes; every rank returns the result. Raises :class:`ConfigError` for a config the reduction
+    does not cover."""
+    from app.io import lock
+    from app.workflows import preflight
+    from app.workflows import reduced as reduced_workflow
+
+    comm = _comm(comm)
+    cfg = config.resolve(cfg)
+    outdir = Path(outdir)
+    try:
+        preflight.check([cfg], comm, outdir, reduced=True, sizes=False, inputs=False)
+        _logging(comm, verbose)
+        reduced_workflow.command(cfg, outdir, comm)
+    finally:
+        lock.release_all()
+    comm.barrier()
+    return Result.load(outdir)
+
+
+@dataclass(frozen=True)
+class Study:
+    """A study's or sweep's answer: one row per case (as study.csv) and each case's :class:`Result`."""
+
+    outdir: Path
+    title: str
+    parameter: str
+    rows: list = field(repr=False)
+
+    @property
+    def complete(self) -> bool:
+        """Whether every case ended buckled or stable."""
+        from app.workflows.studies import COMPLETE
+
+        return all(r["status"] in COMPLETE for r in self.rows)
+
+    @property
+    def results(self) -> list[Result]:
+        """Each case's result, in the order of the rows (cases without a summary are left out)."""
+        out = []
+        for r in self.rows:
+            path = self.outdir / r["directory"]
+            if (path / "summary.json").is_file():
+                out.append(Result.load(path))
+        return out
+
+    @property
+    def files(self) -> dict[str, Path]:
+        """The study's own files (study.csv, study.json, study.png, modes.png, isomodes.png)."""
+        return {p.name: p for p in sorted(self.outdir.iterdir()) if p.is_file() and not p.name.startswith(".")}
+
+
+def _study(cases, outdir: Path, comm, title: str, param: str, ranks_per_case: int, force: bool, solver: str,
+           verbose: bool) -> Study:
+    from app.io import lock
+    from app.workflows import studies
+
+    comm = _comm(comm)
+    try:
+        studies.command(cases, outdir, comm, title, param, ranks_per_case, force, solver == "reduced",
+                        start=lambda: _logging(comm, verbose))
+    finally:
+        lock.release_all()
+    comm.barrier()
+    data = json.loads((outdir / "study.json").read_text())
+    return Study(outdir, data["title"], data["parameter"], data["rows"])
+
+
+def _values(values) -> str | None:
+    if values is None:
+        return None
+    return ",".join(config.toml_value(v) for v in values)
+
+
+def study(name: str, outdir: str | Path, values: Sequence | None = None, overrides: Overrides = None, comm=None,
+          reduced: bool = False, error_estimate: bool = False, ranks_per_case: int = 1, force: bool = False,
+          verbose: bool = False) -> Study:
+    """One of the paper's parameter studies, as ``hydrobuckle study NAME`` (``studies()`` names them):
+    every case in its own subdirectory of ``outdir``, then study.csv/.json/.png. ``values`` replaces the
+    study's own values; ``reduced`` computes every case by the exact 1D reduction (seconds a case).
+    Resumable: a case already complete with the same config is not run again (``force``: all anew)."""
+    from app.workflows import studies as st
+
+    outdir = Path(outdir)
+    spec, cases = st.study_cases(name, outdir, _values(values), _override_list(overrides), error_estimate)
+    return _study(cases, outdir, comm, spec.description, spec.param, ranks_per_case, force,
+                  "reduced" if reduced else "2d", verbose)
+
+
+def sweep(config_path: str | Path, param: str, values: Sequence, outdir: str | Path, overrides: Overrides = None,
+          comm=None, reduced: bool = False, error_estimate: bool = False, ranks_per_case: int = 1,
+          force: bool = False, verbose: bool = False) -> Study:
+    """A sweep of any key ``param`` of the config file ``config_path`` over ``values``, as ``hydrobuckle
+    sweep``."""
+    from app.workflows import studies as st
+
+    outdir = Path(outdir)
+    cases = st.sweep_cases(config_path, param, _values(values), outdir, _override_list(overrides),
+                           error_estimate=error_estimate)
+    return _study(cases, outdir, comm, f"{Path(config_path).stem}: sweep of {param}", param, ranks_per_case, force,
+                  "reduced" if reduced else "2d", verbose)
+
+
+def studies() -> dict[str, str]:
+    """The paper's studies by name, each with its description."""
+    from app.workflows.studies import STUDIES
+
+    return {name: spec.description for name, spec in STUDIES.items()}
