@@ -16,8 +16,8 @@ Its names are imported on first use, so ``import app`` (and the command line) st
 
 from app.version import __version__
 
-__all__ = ["ConfigError", "Result", "Study", "load_config", "load_result", "reduced", "run", "studies", "study",
-           "sweep"]
+__all__ = ["ConfigError", "Result", "Study", "load_config", "load_result", "run", "run_reduced", "studies",
+           "study", "sweep"]
 
 
 def __getattr__(name: str):

@@ -30,8 +30,8 @@ from typing import Any
 from app import config
 from app.schema import ConfigError
 
-__all__ = ["ConfigError", "Result", "Study", "load_config", "load_result", "reduced", "run", "studies", "study",
-           "sweep"]
+__all__ = ["ConfigError", "Result", "Study", "load_config", "load_result", "run", "run_reduced", "studies",
+           "study", "sweep"]
 
 Overrides = Mapping[str, Any] | Sequence[str] | None
 
@@ -206,7 +206,7 @@ def run(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False, force: 
     return Result.load(outdir)
 
 
-def reduced(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False) -> Result:
+def run_reduced(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False) -> Result:
     """The exact 1D reduction of a bilayer or circular tube, as ``hydrobuckle reduced``: g_c and N_c
     converged in 1D mesh and time with an error bar, the margin curve (``margin.csv``) in ``outdir``.
     Rank 0 computes; every rank returns the result. Raises :class:`ConfigError` for a config the reduction

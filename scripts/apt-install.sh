@@ -12,7 +12,7 @@ case "$codename" in
   bookworm|trixie) ;;
   *) echo "install: this system is ${codename:-not Debian} (apt-packages.txt is for Debian 12 bookworm and" \
           "Debian 13 trixie); install FEniCSx (dolfinx 0.5 or 0.9) yourself and then 'pip install -e .'" \
-          "(README, \"Your own FEniCSx\")" >&2
+          "(docs/install.md, \"Your own FEniCSx\")" >&2
      exit 2 ;;
 esac
 [ -f "${list%.txt}-$codename.txt" ] && list="${list%.txt}-$codename.txt"

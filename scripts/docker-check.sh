@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # Build the hydrobuckle Docker images (debian:trixie, the default, and debian:bookworm) and check the
-# README's docker commands on each (minutes; not in .ci/run).
+# docker commands of docs/install.md on each (minutes; not in .ci/run).
 #   bash scripts/docker-check.sh [--tests] [--keep-daemon] [--release=trixie|bookworm]
 # - installs docker.io and debootstrap if missing (apt-get, needs root);
 # - starts dockerd if no daemon answers, and stops only that daemon (by its PID) at the end;
 # - uses debian:trixie / debian:bookworm if present or pullable, else builds them with debootstrap
 #   (minbase) from the Debian mirror this machine's apt uses and imports them;
 # - tags hydrobuckle:trixie, hydrobuckle:bookworm, and hydrobuckle = hydrobuckle:trixie;
-# - builds the image, runs `version`, the README's `mpirun -n 2 hydrobuckle run` on a small mesh as
+# - builds the image, runs `version`, docs/install.md's `mpirun -n 2 hydrobuckle run` on a small mesh as
 #   root and as a non-root --user with a mounted result directory, and fails on: missing console
 #   script, Open MPI "Read -1, expected" noise, a non-writable cache, an image over its size limit (2.9 GB on Debian 13, 2.5 GB on 12), a
 #   result not "buckled";

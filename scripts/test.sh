@@ -1,12 +1,22 @@
 #!/usr/bin/env bash
 # Install what is missing, then run the test suite serially and under `mpirun -n 2`.
 # Any failure, including "no tests collected" (pytest exit code 5), fails the script.
-# Extra arguments go to pytest (e.g. `scripts/test.sh -k config`).
+#   --quick   (first argument) the quick lane: every module, without the long physics (the tests of
+#             tests/data/long-tests.txt, marked `long`) and the tests of about 2 s or more (marked `slow`):
+#             pytest -m "not long and not slow", serially and on 2 ranks; under 5 minutes on 2 cores
+#             (docs/testing.md). Without it: the full suite, what CI runs.
+# Extra arguments go to pytest (e.g. `scripts/test.sh -k config`, `scripts/test.sh --quick tests/test_config.py`).
 #   HYDROBUCKLE_TEST_PARTS=serial|mpi   only that half (.ci/run runs the halves of two stacks in turn)
 #   HYDROBUCKLE_TEST_SHARE=k/n          of the long tests (tests/data/long-tests.txt) only share k of n;
 #                                       every other test (.ci/run: Debian 12 1/2, Debian 13 2/2)
 set -euo pipefail
 parts="${HYDROBUCKLE_TEST_PARTS:-serial mpi}"
+lane=()
+if [ "${1:-}" = "--quick" ]; then
+  shift
+  lane=(-m "not long and not slow")
+fi
+start=$(date +%s)
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 bash scripts/install.sh
@@ -19,9 +29,11 @@ source scripts/mpi-env.sh
 
 if [[ " $parts " == *" serial "* ]]; then
   echo "== pytest, serial"
-  "$here/.venv/bin/python" -m pytest -q -p no:cacheprovider --color=no "$@"
+  "$here/.venv/bin/python" -m pytest -q -p no:cacheprovider --color=no "${lane[@]}" "$@"
+  echo "== serial half: $(( $(date +%s) - start )) s since the start"
 fi
 if [[ " $parts " == *" mpi "* ]]; then
   echo "== pytest, mpirun -n 2"
-  mpirun -n 2 $HB_MPIRUN_FLAGS bash scripts/pytest-rank.sh "$@"
+  mpirun -n 2 $HB_MPIRUN_FLAGS bash scripts/pytest-rank.sh "${lane[@]}" "$@"
 fi
+echo "== test.sh${lane:+ --quick}: passed in $(( $(date +%s) - start )) s"

@@ -60,6 +60,7 @@ def test_bench_counts_each_size_separately(shared_tmp):
         assert runs[1][key] == runs[0][key] > 0, key
 
 
+@pytest.mark.slow
 def test_bench_baseline_runs_beside_the_current_settings(shared_tmp):
     """--baseline: each size also with the settings before the performance work, reported as ratios. The
     current run is given the baseline's step controller (--set time.controller=elementary), so the two differ
@@ -84,6 +85,7 @@ def test_bench_baseline_runs_beside_the_current_settings(shared_tmp):
     assert (out / "run-coarse-np{}-baseline".format(k) / "summary.json").is_file()
 
 
+@pytest.mark.slow
 def test_bench_error_estimate_against_the_layout_before(shared_tmp):
     """--error-estimate --baseline: each variant's error estimate timed against its run. The mesh bars agree
     (the same mesh companion; only factor reuse differs, within Newton's tolerance); the time bar on the

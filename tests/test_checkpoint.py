@@ -285,6 +285,7 @@ def _same_mode_surface(ref, got) -> None:
     assert state <= 1e-10 and mode <= 1e-8, (state, mode)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(MPI.COMM_WORLD.size != 2, reason="writes on 1 rank and resumes on 2 (and the reverse)")
 def test_resume_on_another_rank_count(shared_tmp, comm):
     cfg = swelling_case(*EVERY)

@@ -24,7 +24,7 @@ SMALL = ["--set", "geometry.length=0.3", "--set", "geometry.substrate_thickness=
 
 
 # scripts/install.sh and demo.sh are for the Debian packages and the checkout's .venv; with your own
-# FEniCSx (README, "Your own FEniCSx") the suite runs from your environment and skips their tests
+# FEniCSx (docs/install.md, "Your own FEniCSx") the suite runs from your environment and skips their tests
 DEBIAN_INSTALL = Path(sys.prefix).resolve() == (REPO / ".venv").resolve()
 debian_scripts = pytest.mark.skipif(not DEBIAN_INSTALL, reason="scripts/install.sh and demo.sh: the checkout's "
                                     ".venv over the Debian packages, not this environment")
@@ -107,7 +107,7 @@ def _install_twice(venv):
 
 
 def test_pip_install_into_an_environment_that_has_dolfinx(shared_tmp):
-    """A user's own FEniCSx (README, "Your own FEniCSx"): `pip install -e .` into an environment that sees
+    """A user's own FEniCSx (docs/install.md, "Your own FEniCSx"): `pip install -e .` into an environment that sees
     dolfinx, no apt and no scripts: it fetches nothing (hydrobuckle declares no pip dependencies, so pip
     cannot replace the user's stack), and the console script it makes reports the dolfinx of that
     environment and runs a command from any directory."""

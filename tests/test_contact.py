@@ -111,6 +111,7 @@ def _distance_to_polyline(p, X, face):
     return best
 
 
+@pytest.mark.slow
 def test_a_point_pushed_behind_a_bent_face_has_the_energy_of_its_distance_to_it():
     """Behind a face bent at convex and concave joints, the penalty of the probe is kappa mu / 2 times the
     square of its distance to the face (a polyline distance computed independently; the probe's three points
@@ -351,6 +352,7 @@ def slit_meshes(tmp_path_factory):
     return base
 
 
+@pytest.mark.slow
 def test_a_slit_pressed_onto_itself_is_its_half_with_a_symmetry_line(slit_meshes):
     """Measured serially: |u_full - u_half| = 6.3e-8 mm at the nodes of the left half, below the largest
     penetration (3.1e-7 mm) and against a displacement of 3.1e-4 mm; without contact 5.5e-4 mm. The full
@@ -472,6 +474,7 @@ def _same_creases(got: dict, ref: dict, rel: float) -> None:
     assert _mirrored(xa, xb) <= rel * abs(xb)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run in contact with a serial one")
 def test_a_branch_in_contact_is_the_same_on_1_and_2_ranks(tmp_path):
     """The creasing layer's branch in contact on 2 ranks against the same run on one (every rank alone):
@@ -635,6 +638,7 @@ def test_the_deepest_contact_of_a_symmetric_crease_does_not_flip_with_roundoff()
                     "this soft penalty ends locked through itself (0.42 of an element, a node of each face through the "
                     "other, at every step down to dt_min: status contact; measured 2026-12-05; docs/creases.md, What is "
                     "not built yet)")
+@pytest.mark.slow
 def test_a_soft_penalty_is_raised_until_it_holds_the_contact_and_a_resume_keeps_it(tmp_path):
     """The creasing layer with a penalty 100 times softer than the default (kappa = 10, the key's lowest): in
     its first branch step it snaps into the crease and overruns the penalty (0.43 of an element, measured serially),

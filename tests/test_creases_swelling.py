@@ -78,6 +78,7 @@ def test_a_drained_trial_is_the_same_on_one_and_two_ranks(comm):
     assert got.difference > 0  # below the onset
 
 
+@pytest.mark.slow
 def test_the_drained_crease_costs_less_than_the_undrained_one_and_comes_first(comm):
     """At the same bath potentials (stretch 2.29 and 2.37, 8 elements along the crease), the drained
     creased state is a minimum over more states than the undrained one, from the same flat state: its
@@ -145,6 +146,7 @@ def test_which_comes_first_is_left_open_for_a_wrinkling_onset_away_from_equilibr
     assert workflow._first(onset, {"time": 0.95, "growth_mm": 0.6}, None) == "crease"
 
 
+@pytest.mark.slow
 def test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_statically_is_the_undrained_one(comm):
     """stability.crease_fluid = "transient": both states hold, in every cell, the content the run's uniform
     transient (the exact 1D reduction) has reached at t. On the quasi-static layer at t = 9700 s (stretch

@@ -147,7 +147,7 @@ def test_residual_vanishes_in_the_reference_state(comm, ratio):
 
     The mechanical residual vanishes for every modulus ratio (each layer is stress-free); the flux
     residual vanishes for a homogeneous gel and, for a bilayer, equals the jump of mu0 across the
-    interface (the initial chemical mismatch between layers; README, "Each layer has its own
+    interface (the initial chemical mismatch between layers; docs/model.md, "Each layer has its own
     reference state")."""
     cfg = small_bilayer(**{"material.film.modulus_ratio": ratio})
     p = factory.problem(cfg, comm)

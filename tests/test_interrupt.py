@@ -10,6 +10,8 @@ from __future__ import annotations
 import os
 import signal
 
+import pytest
+
 from cases import BUCKLING_STRIP_TOML
 from conftest import (EXE, finish, on_rank0, open_mpi_major, read_json, session_processes, start, valid_history,
                       wait_rows)
@@ -66,6 +68,7 @@ def _check_results(out, sig_name, ranks, rows=5):
     return summary
 
 
+@pytest.mark.slow
 def test_sigint_serial_exits_130_with_history_and_summary(shared_tmp):
     """Ctrl-C on a serial run: exit 130, status "interrupted", the rows up to the interruption."""
     cfg = shared_tmp / "long.toml"
@@ -78,6 +81,7 @@ def test_sigint_serial_exits_130_with_history_and_summary(shared_tmp):
     _check_results(out, "SIGINT", ranks=1)
 
 
+@pytest.mark.slow
 def test_sigterm_serial_exits_143(shared_tmp):
     """A wall-time limit's SIGTERM on a serial run: exit 143 (128 + 15)."""
     cfg = shared_tmp / "long.toml"
@@ -173,6 +177,7 @@ plot = false
 """
 
 
+@pytest.mark.slow
 def test_sigterm_during_side_by_side_companions_keeps_the_answer(shared_tmp):
     """A scheduler's SIGTERM to both ranks while the error estimate's companions run side by side (one per
     rank): every group stops its companion, the ranks meet again, the run's own answer is written

@@ -1,4 +1,4 @@
-"""A user's own .msh mesh with default settings (README, "Your own geometry"): the README's example run
+"""A user's own .msh mesh with default settings (docs/geometries.md, "Your own geometry"): the docs' example run
 exactly as written ends with summary.json and an error bar; a .msh mesh is refined by splitting every
 cell (mesh.refinements), which keeps the file's geometry and groups; converge refines a .msh mesh.
 
@@ -20,12 +20,12 @@ from mpi4py import MPI
 from app import cli, config
 from app.workflows.run import simulate
 
-README = REPO / "README.md"
+GUIDE = REPO / "docs" / "geometries.md"  # the user's guide page with the example
 
 
 def _block(marker: str, lang: str) -> str:
-    """The fenced ``lang`` block after ``<!-- own-geometry:marker -->`` in the README."""
-    text = README.read_text()
+    """The fenced ``lang`` block after ``<!-- own-geometry:marker -->`` in docs/geometries.md."""
+    text = GUIDE.read_text()
     i = text.index(f"<!-- own-geometry:{marker} -->")
     j = text.index(f"```{lang}\n", i) + len(f"```{lang}\n")
     return text[j:text.index("```", j)]
@@ -48,7 +48,7 @@ def _readme_example(workdir):
     return out
 
 
-@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the README's commands are serial: the serial session runs them")
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the guide's commands are serial: the serial session runs them")
 def test_readme_own_geometry_example_as_written(tmp_path, comm):
     """Each command exits 0 without a traceback; the run ends with the result line and summary.json
     holding g_c and both parts of its error bar, the mesh part from the file split once (4x its cells);
@@ -203,7 +203,7 @@ def test_converge_refines_a_msh_mesh(shared_tmp, comm, capsys):
 
 
 def test_msh_run_with_default_settings_reports_an_error_bar(shared_tmp, comm):
-    """The same path as the README's example on a small file, in-process (serially and on 2 ranks): a .msh
+    """The same path as the guide's example on a small file, in-process (serially and on 2 ranks): a .msh
     run with the default stability.error_estimate ends buckled with both parts of its error bar, the mesh
     part from the file split once (4x the cells), the time part from a companion 2x coarser in its steps."""
     from app.workflows.pipeline import run_case

@@ -697,6 +697,7 @@ def test_a_minimizing_step_that_ends_uphill_is_rejected(monkeypatch, tmp_path):
     assert s["final"]["time"] == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 def test_a_branch_step_whose_extrapolated_start_inverts_a_cell_starts_from_the_last_state(monkeypatch, tmp_path):
     """Past a snap the last step's displacement rate, extrapolated, can carry the minimizer's initial guess outside
     its energy's domain (an inverted cell: ln J undefined). Started there, every trial of its backtracking line

@@ -1,4 +1,4 @@
-"""One live job per result directory (app/io/lock.py; README, "Configuration"): a command whose result
+"""One live job per result directory (app/io/lock.py; docs/configuration.md): a command whose result
 directory, a directory around it or one inside it is held by a live job is refused with one line naming
 the directory and that job, exit 2, before it writes anything; the first job's results stay its own; a
 finished or killed job's directory can be written again.
@@ -81,6 +81,7 @@ def test_every_command_refuses_a_directory_a_live_job_holds(shared_tmp, comm, ca
     lock.release_all()
 
 
+@pytest.mark.slow
 def test_inherited_lock_lets_a_job_s_own_launches_in(shared_tmp, comm):
     """A process given the held directory in HYDROBUCKLE_HELD_DIRS (what bench --ranks hands its mpirun
     launches) may write into it; without it, the same process is refused."""

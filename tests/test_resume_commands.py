@@ -85,6 +85,7 @@ def _interrupt_bench(out):
     return code, stdout, sorted(p.name for p in out.iterdir()), read_json(out / "run-coarse-np1" / "summary.json")
 
 
+@pytest.mark.slow
 @child_jobs
 def test_interrupted_bench_writes_no_result(shared_tmp):
     """SIGINT during bench's first size: exit 130, the second size never starts, and neither bench.json

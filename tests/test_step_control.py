@@ -1,5 +1,5 @@
 """The step-size controller (app/solvers/step_control.py) against hand values of the documented rules
-(README, "Time stepping"): dt_next = dt * clamp(0.9 sqrt(tol/err), 0.2, 2) within [dt_min, dt_max],
+(docs/model.md, "Time stepping"): dt_next = dt * clamp(0.9 sqrt(tol/err), 0.2, 2) within [dt_min, dt_max],
 rejection retries, the cut-back by 4, and no estimate -> dt unchanged; the predictive rule (the factor
 divided by sqrt(rho) while the error constant err/dt^2 grows by rho) against hand values and, on a model
 error whose constant grows exponentially in time, against the rejections of the elementary rule. No mesh,

@@ -1,7 +1,7 @@
 """Time stepping (app/stepping.py) and crossings located within one step (app/onset.py, app/run.py).
 
 References: the fixed time grid written out by hand; the step-size controller's formula
-dt_next = dt * clamp(0.9 sqrt(tol/err), 0.2, 2) (README, "Time stepping"); the documented cut-back
+dt_next = dt * clamp(0.9 sqrt(tol/err), 0.2, 2) (docs/model.md, "Time stepping"); the documented cut-back
 factor 4; a run without Newton failures (the same final state within the error tolerance); and, for
 several eigenvalues crossing in one step, the ordering and bracket width that the onset bisection
 promises (every bracket inside the step, narrower than stability.tolerance).
@@ -65,7 +65,7 @@ def test_fixed_steps_follow_the_grid_and_stop_at_the_ramp_end(comm):
 
 def test_max_steps_stops_the_run_as_a_failure(shared_tmp):
     """time.max_steps = 3: exactly three steps are kept, the run ends with status "failed" naming the
-    key, exit code 1 (README: solver failure)."""
+    key, exit code 1 (docs/running.md: solver failure)."""
     cfg_path, out = shared_tmp / "c.toml", shared_tmp / "out"
     _write(cfg_path, "[geometry]\nlength = 0.1\nsubstrate_thickness = 0.05\n[mesh]\nelement_size = 0.01\n"
                      "film_layers = 2\n[time]\nend = 1.0\ndt_initial = 0.01\n[stability]\nenabled = false\n"
@@ -84,7 +84,7 @@ def test_error_control_rejects_steps_and_bounds_every_accepted_error(comm, contr
     """A tiny tolerance forces rejections; every accepted step's estimate is within the tolerance
     (only the first step has none), and each accepted step is at most the controller's proposal of the step
     before: dt * clamp(f, 0.2, 2), f = 0.9 sqrt(tol/err), divided by sqrt(rho) for the predictive rule while
-    the error constant err/dt^2 grew by rho > 1 over the step (README, Time stepping), written out here from
+    the error constant err/dt^2 grew by rho > 1 over the step (docs/model.md, Time stepping), written out here from
     the history's columns. Smaller only after a rejection, or when clipped at the end."""
     tol = 1e-6
     cfg = small_bilayer(**{"time.tolerance": tol, "time.dt_initial": 0.01, "time.end": 0.5,

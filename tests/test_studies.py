@@ -68,6 +68,7 @@ def test_cli_study_rejects_bad_input(shared_tmp, capsys):
         assert capsys.readouterr().err.strip().splitlines() == ["hydrobuckle: error: config file 'nope.toml' does not exist"]
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="groups of ranks need several ranks")
 def test_rank_groups_give_the_same_results_as_one_by_one(shared_tmp):
     """Cases on 2-rank groups (each case distributed) against the same cases run side by side on one

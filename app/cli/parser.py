@@ -21,7 +21,7 @@ def _add(sub, name: str, help: str, config_arg: bool = True, output: str | None 
     """A subcommand with the usual arguments: the config file, --set, -o/--output (``output``: its help), -q."""
     p = sub.add_parser(name, help=help)
     if config_arg:
-        p.add_argument("config", help="TOML config file (keys: see README)")
+        p.add_argument("config", help="TOML config file (keys: docs/reference, or hydrobuckle validate CONFIG)")
     if output is not None:
         p.add_argument("-o", "--output", help=output, **output_kw)
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",

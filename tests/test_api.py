@@ -1,0 +1,170 @@
+"""The Python API (app.api, re-exported from ``app``): the same checks, files and summary as the command
+line, and answers read back from what was written."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+from conftest import EXE, REPO, child_env, child_jobs, rank_local, read_json
+from mpi4py import MPI
+
+import app as hb
+from app import cli, config
+
+SMALL = """
+[geometry]
+length = 0.1
+substrate_thickness = 0.05
+film_thickness = 0.01
+[mesh]
+element_size = 0.01
+film_layers = 2
+substrate_grading = 1.3
+[material.film]
+modulus_ratio = 8.0
+[time]
+end = 2.0
+dt_initial = 0.01
+dt_max = 0.1
+[stability]
+error_estimate = true
+[reduced]   # a coarse 1D reduction: these tests compare the API with the CLI, not the answer's accuracy
+beside_2d = true
+degree = 2
+film_cells = 4
+grid = 16
+max_wavenumber = 5
+"""
+
+
+def _small(dirpath):
+    path = dirpath / "small.toml"
+    if MPI.COMM_WORLD.rank == 0:
+        path.write_text(SMALL)
+    MPI.COMM_WORLD.barrier()
+    return path
+
+
+@rank_local
+def test_the_api_is_the_package_s_top_level_and_import_stays_light():
+    """Every exported name resolves from ``app``; ``import app`` alone does not import dolfinx (the command
+    line's bad-input paths stay quick), checked in a fresh interpreter."""
+    from app import api
+
+    for name in hb.__all__:
+        assert getattr(hb, name) is getattr(api, name)
+    code = "import sys, app; assert 'dolfinx' not in sys.modules and 'app.api' not in sys.modules"
+    proc = subprocess.run([str(Path(EXE).parent / "python"), "-c", code], env=child_env(), cwd=REPO, capture_output=True,
+                          text=True)
+    assert proc.returncode == 0, proc.stderr
+    with pytest.raises(AttributeError):
+        hb.no_such_function  # noqa: B018
+
+
+@rank_local
+def test_load_config_takes_overrides_as_the_cli_s_set(tmp_path):
+    """A mapping and ``KEY=VALUE`` strings give the config ``--set`` gives (the same resolved dict as
+    ``hydrobuckle validate`` prints); defaults without a file; a bad value is the CLI's one line."""
+    path = _small(tmp_path)
+    a = hb.load_config(path, {"material.film.modulus_ratio": 20, "loading.kind": "swelling", "time.adaptive": False})
+    b = hb.load_config(path, ["material.film.modulus_ratio=20", "loading.kind=swelling", "time.adaptive=false"])
+    assert a == b == config.load(path, ["material.film.modulus_ratio=20", "time.adaptive=false"])
+    assert a["material"]["film"]["modulus_ratio"] == 20.0 and a["time"]["adaptive"] is False
+    assert hb.load_config() == config.resolve({})
+    with pytest.raises(hb.ConfigError) as err:
+        hb.load_config(path, {"mesh.film_layers": 0})
+    assert "mesh.film_layers" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_bad_input_raises_before_any_directory_exists(shared_tmp):
+    """A config edited by hand into an invalid state is checked again by ``run``: ConfigError naming the
+    key, and no result directory (1 and 2 ranks)."""
+    cfg = hb.load_config(_small(shared_tmp))
+    cfg["mesh"]["film_layers"] = 0
+    with pytest.raises(hb.ConfigError, match="mesh.film_layers"):
+        hb.run(cfg, shared_tmp / "bad")
+    assert not (shared_tmp / "bad").exists()
+
+
+def test_run_returns_what_the_cli_writes(shared_tmp, comm):
+    """``hb.run`` and ``hydrobuckle run`` (cli.main in the same process, the same ranks) on one config:
+    the same summary (every number to 1e-12: the same computation), the same history; the Result's
+    g_c, error bar, N_c, time and 1D counterpart are the summary's, its history the CSV's columns, its
+    files the directory's."""
+    path = _small(shared_tmp)
+    assert cli.main(["run", str(path), "-o", str(shared_tmp / "cli"), "-q"]) == 0
+    result = hb.run(hb.load_config(path), shared_tmp / "api")
+    ref = read_json(shared_tmp / "cli" / "summary.json")
+    s = result.summary
+    assert s == read_json(shared_tmp / "api" / "summary.json")
+    assert s["status"] == ref["status"] == "buckled"
+    for key in ("growth_um", "time", "wrinkle_count"):
+        assert s["critical"][key] == pytest.approx(ref["critical"][key], rel=1e-12)
+    assert (s["critical"]["discretization_error"]["total_um"]
+            == pytest.approx(ref["critical"]["discretization_error"]["total_um"], rel=1e-12))
+    assert s["reduced"]["growth_um"] == pytest.approx(ref["reduced"]["growth_um"], rel=1e-12)
+
+    assert result.g_c_um == s["critical"]["growth_um"]
+    assert result.g_c_error_um == s["critical"]["discretization_error"]["total_um"]
+    assert result.N_c == s["critical"]["wrinkle_count"] and result.critical_time == s["critical"]["time"]
+    one_d = result.reduced
+    assert one_d.solver == "reduced-1d" and one_d.g_c_um == s["reduced"]["growth_um"]
+    assert one_d.g_c_error_um == s["reduced"]["growth_error_um"] and one_d.N_c == s["reduced"]["wrinkle_count"]
+    with (shared_tmp / "cli" / "history.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert len(result.history["time"]) == len(rows)
+    assert result.history["growth_mm"] == pytest.approx([float(r["growth_mm"]) for r in rows], rel=1e-12)
+    assert {"summary.json", "history.csv", "config.toml", "mode.png"} <= set(result.files)
+    assert hb.load_result(shared_tmp / "api").summary == s
+    assert f"{result.g_c_um:.4f}" in str(result)
+
+
+@child_jobs
+@pytest.mark.slow
+def test_a_script_under_mpirun_gets_the_same_answer_on_every_rank(tmp_path):
+    """``mpirun -n 2 python script.py`` calling ``hb.run``: each rank prints the same g_c, equal to a
+    serial ``hydrobuckle run`` of the config within the 1 = 2 ranks tolerance (1e-6, tests/test_parallel.py)."""
+    from conftest import launcher_quiet
+
+    path = _small(tmp_path)
+    script = tmp_path / "script.py"
+    script.write_text("import json, sys\nimport app as hb\n"
+                      f"r = hb.run(hb.load_config({str(path)!r}), {str(tmp_path / 'mpi')!r})\n"
+                      "print('RESULT', json.dumps([r.g_c_um, r.N_c, r.status]), flush=True)\n")
+    proc = subprocess.run(["mpirun", "-n", "2", *launcher_quiet(), str(Path(EXE).parent / "python"), str(script)],
+                          env=child_env(), cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    answers = [json.loads(line.split(" ", 1)[1]) for line in proc.stdout.splitlines() if line.startswith("RESULT")]
+    assert len(answers) == 2 and answers[0] == answers[1]
+    serial = subprocess.run([EXE, "run", str(path), "-o", str(tmp_path / "serial"), "-q"], env=child_env(),
+                            cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert serial.returncode == 0, serial.stderr
+    ref = read_json(tmp_path / "serial" / "summary.json")["critical"]
+    assert answers[0][0] == pytest.approx(ref["growth_um"], rel=1e-6) and answers[0][1] == ref["wrinkle_count"]
+
+
+@pytest.mark.slow
+def test_reduced_and_a_reduced_sweep_are_the_commands(shared_tmp):
+    """``hb.run_reduced`` = ``hydrobuckle reduced`` (the same 1D computation: summary equal but for its wall
+    time); ``hb.sweep(..., reduced=True)``: one row per value, each case's g_c the reduction of that case
+    alone, and the Study's results read back from the case directories."""
+    path = _small(shared_tmp)
+    assert cli.main(["reduced", str(path), "-o", str(shared_tmp / "cli-1d")]) == 0
+    r = hb.run_reduced(hb.load_config(path), shared_tmp / "api-1d")
+    ref = read_json(shared_tmp / "cli-1d" / "summary.json")
+    assert r.solver == "reduced-1d" and r.status == ref["status"]
+    assert r.g_c_um == pytest.approx(ref["reduced"]["growth_um"], rel=1e-12)
+    assert r.g_c_error_um == pytest.approx(ref["reduced"]["growth_error_um"], rel=1e-12)
+    assert r.N_c == ref["reduced"]["wrinkle_count"] and "margin.csv" in r.files
+
+    st = hb.sweep(path, "material.film.modulus_ratio", [8.0, 20.0], shared_tmp / "sweep", reduced=True)
+    assert st.complete and [row["value"] for row in st.rows] == [8.0, 20.0]
+    assert st.rows[0]["g_c_um"] == pytest.approx(r.g_c_um, rel=1e-12)
+    assert [x.g_c_um for x in st.results] == [row["g_c_um"] for row in st.rows]
+    assert st.results[1].g_c_um < st.results[0].g_c_um  # a stiffer film wrinkles earlier (paper's trend)
+    assert "study.csv" in st.files
+    assert set(hb.studies()) >= {"bilayer-modulus-ratio", "tube-film-thickness"}
