@@ -31,6 +31,7 @@ nb_execution_timeout = 900
 nb_execution_raise_on_error = True
 nb_execution_show_tb = True
 nb_merge_streams = True
+nb_execution_in_temp = True  # the demos write their results into a temporary directory, not into docs/
 
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"

@@ -92,7 +92,7 @@ import matplotlib.pyplot as plt
 
 h = result.history
 fig, ax = plt.subplots(figsize=(6, 3.5))
-ax.plot(h["time"], h["growth_um"], ".-", label="growth")
+ax.plot(h["time"], 1e3 * h["growth_mm"], ".-", label="growth")
 ax.axhline(result.g_c_um, color="C3", ls="--", label=f"$g_c$ = {result.g_c_um:.2f} um")
 ax.set_xlabel("time [s]")
 ax.set_ylabel("growth [um]")

@@ -55,7 +55,7 @@ def config_page() -> str:
              "loading and stability criterion declares). Every key is optional; `--set KEY=VALUE` (CLI) or",
              "`load_config(path, {KEY: VALUE})` (Python) overrides any of them. A value outside its range stops",
              "with one line naming the key and the allowed range (exit code 2). How the keys work together:",
-             "[Configuration](../configuration.md).", ""]
+             "[Configuration](../../configuration.md).", ""]
     current = None
     for name, spec in schema_keys():
         table = name.split(".")[0] if not name.startswith("material.film.") else "material.film"
