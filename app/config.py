@@ -83,7 +83,8 @@ def _geometry_table() -> dict:
     from app import geometry
 
     kinds = _kinds()
-    table: dict[str, Key] = {"kind": _key(str, geometry.DEFAULT_KIND, _one_of(*kinds.names()))}
+    table: dict[str, Key] = {"kind": _key(str, geometry.DEFAULT_KIND, _one_of(*kinds.names()),
+                                          "the geometry (docs/geometries.md); its keys' defaults depend on it")}
     for kind in kinds:
         for name, spec in kind.keys.items():
             if name == "kind":
@@ -152,7 +153,9 @@ def _loading_table() -> dict:
     """``kind`` and every registered loading's keys with their defaults (a loading reads its own)."""
     from app.model import loading
 
-    table: dict[str, Key] = {"kind": _key(str, loading.DEFAULT_LOADING, _one_of(*_loadings().names()))}
+    table: dict[str, Key] = {"kind": _key(str, loading.DEFAULT_LOADING, _one_of(*_loadings().names()),
+                                          "the loading: swelling through the permeable surface (the paper's), or "
+                                          "compression (bilayer; diffusion off, the right edge moved)")}
     for lo in _loadings():
         for name, spec in lo.keys.items():
             if name in table and table[name] is not spec:

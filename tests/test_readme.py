@@ -84,7 +84,6 @@ def test_readme_more_commands_run_as_written(tmp_path):
 
 
 @serial_only
-@pytest.mark.long
 def test_readme_python_example_prints_the_g_c_of_the_cli_example(tmp_path):
     """The CLI block and the Python block, run as written: both exit 0; the Python example prints the
     g_c, error bar and N_c of the CLI's result line (same digits), and the two summaries agree to

@@ -15,7 +15,7 @@ TIME: dict[str, Key] = {
     "controller": key(str, "predictive", one_of("predictive", "elementary"),
                       "the adaptive step's rule: elementary = dt 0.9 sqrt(tol/err); predictive = the same, "
                       "slowed by the growth of err/dt^2 over the last step while it grows (fewer rejected steps)"),
-    "max_steps": key(int, 100000, ge(1)),
+    "max_steps": key(int, 100000, ge(1), "stop after this many accepted steps (status 'failed', exit code 1)"),
     "stop_at_equilibrium": key(float, 0.0, ge(0.0),
                                "end the run (status equilibrium) once the relative fluid uptake rate "
                                "|dV/dt| t / |V - V(0)| after the last loading kink is below this; 0 = off"),
