@@ -40,3 +40,40 @@ autodoc_default_options = {"members": True, "undoc-members": False}
 html_theme = "furo"
 html_title = f"hydrobuckle {release}"
 html_static_path = []
+
+# Math: Debian's MathJax (libjs-mathjax, installed by scripts/docs.sh), its TeX -> CommonHTML parts copied
+# into the site, so that formulas render offline and on a machine without internet; without it, MathJax
+# from its CDN (Sphinx's default).
+_MATHJAX = Path("/usr/share/javascript/mathjax")
+_MATHJAX_PARTS = ["MathJax.js", "config/TeX-AMS_CHTML.js", "extensions", "jax/input/TeX", "jax/output/CommonHTML",
+                  "jax/element", "fonts/HTML-CSS/TeX/woff", "localization/en"]
+
+
+def _local_mathjax() -> str | None:
+    import shutil
+
+    if not (_MATHJAX / "MathJax.js").is_file():
+        return None
+    static = DOCS / "_build" / "_static_mathjax"
+    target = static / "mathjax"
+    if not (target / "MathJax.js").is_file():
+        for part in _MATHJAX_PARTS:
+            src, dst = (_MATHJAX / part).resolve(), target / part
+            if src.is_dir():
+                shutil.copytree(src, dst, dirs_exist_ok=True)
+            elif src.is_file():
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(src, dst)
+    html_static_path.append(str(static))
+    return "mathjax/MathJax.js?config=TeX-AMS_CHTML"
+
+
+_path = _local_mathjax()
+if _path:
+    mathjax_path = _path
+    # MathJax 2: Sphinx writes math as \( \) and \[ \] in elements of class "math"; MyST's own MathJax 3
+    # settings (the "mathjax_ignore" sections) are switched off, they would hide those from MathJax 2
+    myst_update_mathjax = False
+    mathjax2_config = {"tex2jax": {"inlineMath": [["\\(", "\\)"]], "displayMath": [["\\[", "\\]"]],
+                                   "processEscapes": True, "processClass": "math|output_area"},
+                       "messageStyle": "none"}

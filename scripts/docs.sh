@@ -2,7 +2,7 @@
 # Build the documentation site (docs/ -> docs/_build/html) with warnings as errors, then check the built
 # home page and a generated reference page in a headless browser (Debian's chromium; scripts/docs_check.py).
 # Installs what is missing: hydrobuckle (scripts/install.sh), the docs' tools into the venv
-# (scripts/docs-requirements.txt, from PyPI) and chromium (apt). The getting-started demo
+# (scripts/docs-requirements.txt, from PyPI), MathJax and chromium (apt). The getting-started demo
 # (docs/demos/*.py) is executed during the build, on a small mesh.
 #   HYDROBUCKLE_DOCS_EXECUTE=0   do not execute the demos (a quick look at the text; not what CI runs)
 #   HYDROBUCKLE_DOCS_NO_BROWSER=1  skip the browser check
@@ -31,20 +31,28 @@ for req in sys.argv[1:]:
     assert metadata.version(name) == version, f"{name} {metadata.version(name)} installed, {version} wanted"
 PY
 fi
+# Debian packages of the site: MathJax (formulas render offline; docs/conf.py copies its parts into the
+# site) and chromium with a font for the browser check
+debs=(libjs-mathjax)
+[ -n "${HYDROBUCKLE_DOCS_NO_BROWSER:-}" ] || debs+=(chromium fonts-dejavu-core)
+missing=()
+for p in "${debs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "docs: apt-get installing ${missing[*]}"
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
 source scripts/mpi-env.sh
 rm -rf docs/_build/html docs/_build/jupyter_execute
 echo "docs: sphinx-build -W (warnings are errors)"
 "$py" -m sphinx -W --keep-going -q -b html docs docs/_build/html
 echo "docs: built docs/_build/html ($(( $(date +%s) - start )) s)"
 if [ -z "${HYDROBUCKLE_DOCS_NO_BROWSER:-}" ]; then
-  if ! command -v chromium >/dev/null 2>&1; then
-    echo "docs: apt-get installing chromium for the browser check"
-    SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
-    export DEBIAN_FRONTEND=noninteractive
-    $SUDO apt-get update -qq
-    $SUDO apt-get install -y -qq --no-install-recommends chromium fonts-dejavu-core >/dev/null
-  fi
   "$py" scripts/docs_check.py docs/_build/html index.html reference/generated/config.html \
-    reference/generated/cli.html reference/api.html tutorial.html
+    reference/generated/cli.html reference/api.html tutorial.html model.html
 fi
 echo "docs: ok ($(( $(date +%s) - start )) s) -> docs/_build/html/index.html"

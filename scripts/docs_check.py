@@ -4,7 +4,7 @@ Usage: python scripts/docs_check.py HTML_DIR PAGE [PAGE ...]  (scripts/docs.sh r
 
 For each page: chromium loads it from disk and runs its scripts (``--dump-dom``); the check fails on a
 console error (an uncaught exception, a resource that failed to load), a page without a title heading or
-with little text, markup left unrendered (MyST fences or directives shown as text), a traceback in an
+with little text, markup left unrendered (MyST fences or directives shown as text, TeX that MathJax did not typeset), a traceback in an
 executed cell's output, or a local link or image whose file does not exist. A screenshot of each page
 goes to HTML_DIR/../screenshots/ to look at.
 """
@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 from urllib.parse import unquote, urlparse
 
-UNRENDERED = ("```", "{eval-rst}", "{code-cell}", ":::{", "{toctree}", "(hydrobuckle-")
+UNRENDERED = ("```", "{eval-rst}", "{code-cell}", ":::{", "{toctree}", "(hydrobuckle-", "\\(", "\\[", "$$")
 CONSOLE_ERROR = re.compile(r"Uncaught|Failed to load resource|ERR_FILE_NOT_FOUND|SyntaxError|ReferenceError")
 
 
