@@ -37,11 +37,20 @@ Overrides = Mapping[str, Any] | Sequence[str] | None
 
 
 def _override_list(overrides: Overrides) -> list[str]:
-    """``{"mesh.element_size": 0.008}`` or ``["mesh.element_size=0.008"]`` as the CLI's ``--set`` items."""
+    """``{"mesh.element_size": 0.008}``, ``["mesh.element_size=0.008"]`` or one such string as the CLI's
+    ``--set`` items; a value TOML cannot hold is a ConfigError naming its key."""
     if overrides is None:
         return []
+    if isinstance(overrides, str):
+        return [overrides]
     if isinstance(overrides, Mapping):
-        return [f"{k}={config.toml_value(v)}" for k, v in overrides.items()]
+        items = []
+        for k, v in overrides.items():
+            if v is None or isinstance(v, Mapping):
+                raise ConfigError(str(k), f"= {v!r} cannot be set as an override; allowed: a number, a string, "
+                                  "a boolean or a list")
+            items.append(f"{k}={config.toml_value(v)}")
+        return items
     return [str(item) for item in overrides]
 
 
@@ -67,7 +76,43 @@ def _comm(comm):
 def _logging(comm, verbose: bool) -> None:
     from app import logging_setup
 
-    logging_setup.setup(comm, logging.INFO if verbose else logging.WARNING)
+    logging_setup.setup(comm, logging.INFO if verbose else logging.WARNING, root=False)
+
+
+def _read_on_rank0(comm, read):
+    """``read()`` on rank 0, its value (or its error) on every rank: the result files are rank 0's, and a
+    multi-node job need not share a file system."""
+    value, error = None, None
+    if comm.rank == 0:
+        try:
+            value = read()
+        except Exception as err:  # noqa: BLE001 - raised again on every rank
+            error = err
+    value, error = comm.bcast((value, error), root=0)
+    if error is not None:
+        raise error
+    return value
+
+
+def _finish(comm) -> None:
+    """After a command: the locks released; a SIGINT/SIGTERM that stopped it (its summary says
+    ``interrupted`` and the run can be resumed) is raised as KeyboardInterrupt, so a script or notebook stops
+    too, and is forgotten so that the next call starts afresh."""
+    from app import interrupt
+    from app.io import lock
+
+    lock.release_all()
+    signal_number = interrupt.agreed or comm.allreduce(interrupt._received, op=_max_op())
+    interrupt.reset()
+    if signal_number:
+        raise KeyboardInterrupt(f"hydrobuckle: interrupted by {interrupt.name(signal_number)}; what was computed "
+                                "is kept (run: summary.json says 'interrupted', run --resume continues)")
+
+
+def _max_op():
+    from mpi4py import MPI
+
+    return MPI.MAX
 
 
 def _read_csv(path: Path) -> dict[str, Any]:
@@ -91,7 +136,7 @@ def _read_csv(path: Path) -> dict[str, Any]:
     return columns
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Result:
     """What a run (or the 1D reduction) wrote into its result directory, read back.
 
@@ -140,7 +185,10 @@ class Result:
         """g_c's estimated discretization error [um] (None when not estimated)."""
         if self.solver == "reduced-1d":
             return self._onset.get("growth_error_um")
-        return (self._onset.get("discretization_error") or {}).get("total_um")
+        est = self._onset.get("discretization_error") or {}
+        if est.get("time_um") is None and est.get("mesh_um") is None:
+            return None  # no companion gave an estimate (summary.json's discretization_error says why)
+        return est.get("total_um")
 
     @property
     def N_c(self) -> float | None:  # noqa: N802 - the paper's name
@@ -186,24 +234,30 @@ def run(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False, force: 
     directory), the simulation to its onset (or past it, as the config says), its error estimate and its
     exact 1D counterpart where the config asks for them; everything written into ``outdir``.
 
-    ``cfg``: a resolved config (:func:`load_config`). ``comm``: the communicator to run on (default
+    ``cfg``: a resolved config (:func:`load_config`; change ``geometry.kind`` through its overrides, not in
+    the dict, so that the new kind's defaults apply). ``comm``: the communicator to run on (default
     ``MPI.COMM_WORLD``). ``verbose``: the progress lines (one per step) on rank 0. ``force``: accept a mesh
-    above the size limit. Raises :class:`ConfigError` for bad input (nothing written)."""
-    from app.io import lock
+    above the size limit.
+
+    Raises :class:`ConfigError` for bad input (nothing written), ``app.io.writes.ResultWriteError`` when a
+    result file cannot be written (what was written is kept), and KeyboardInterrupt after a SIGINT or
+    SIGTERM once the run has stopped and saved its state (``hydrobuckle run --resume`` continues it). A
+    solver failure is not an exception: the Result's ``status`` is ``"failed"``, everything computed kept."""
+    from app import interrupt
     from app.workflows import preflight
     from app.workflows.pipeline import run_case
 
     comm = _comm(comm)
     cfg = config.resolve(cfg)  # validated again: a dict edited by hand is checked like a file
     outdir = Path(outdir)
+    interrupt.reset()
     try:
         preflight.check([cfg], comm, outdir, force=force)
         _logging(comm, verbose)
         run_case(cfg, outdir, comm, progress=verbose)
     finally:
-        lock.release_all()
-    comm.barrier()
-    return Result.load(outdir)
+        _finish(comm)
+    return _read_on_rank0(comm, lambda: Result.load(outdir))
 
 
 def run_reduced(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False) -> Result:
@@ -211,24 +265,24 @@ def run_reduced(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False)
     converged in 1D mesh and time with an error bar, the margin curve (``margin.csv``) in ``outdir``.
     Rank 0 computes; every rank returns the result. Raises :class:`ConfigError` for a config the reduction
     does not cover."""
-    from app.io import lock
+    from app import interrupt
     from app.workflows import preflight
     from app.workflows import reduced as reduced_workflow
 
     comm = _comm(comm)
     cfg = config.resolve(cfg)
     outdir = Path(outdir)
+    interrupt.reset()
     try:
         preflight.check([cfg], comm, outdir, reduced=True, sizes=False, inputs=False)
         _logging(comm, verbose)
         reduced_workflow.command(cfg, outdir, comm)
     finally:
-        lock.release_all()
-    comm.barrier()
-    return Result.load(outdir)
+        _finish(comm)
+    return _read_on_rank0(comm, lambda: Result.load(outdir))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Study:
     """A study's or sweep's answer: one row per case (as study.csv) and each case's :class:`Result`."""
 
@@ -239,19 +293,18 @@ class Study:
 
     @property
     def complete(self) -> bool:
-        """Whether every case ended buckled or stable."""
+        """Whether every case ended complete (buckled, stable or at equilibrium)."""
         from app.workflows.studies import COMPLETE
 
         return all(r["status"] in COMPLETE for r in self.rows)
 
     @property
-    def results(self) -> list[Result]:
-        """Each case's result, in the order of the rows (cases without a summary are left out)."""
+    def results(self) -> list[Result | None]:
+        """Each case's result, row by row (None for a case that wrote no summary: not run, or killed)."""
         out = []
         for r in self.rows:
             path = self.outdir / r["directory"]
-            if (path / "summary.json").is_file():
-                out.append(Result.load(path))
+            out.append(Result.load(path) if (path / "summary.json").is_file() else None)
         return out
 
     @property
@@ -262,23 +315,25 @@ class Study:
 
 def _study(cases, outdir: Path, comm, title: str, param: str, ranks_per_case: int, force: bool, solver: str,
            verbose: bool) -> Study:
-    from app.io import lock
+    from app import interrupt
     from app.workflows import studies
 
     comm = _comm(comm)
+    interrupt.reset()
     try:
         studies.command(cases, outdir, comm, title, param, ranks_per_case, force, solver == "reduced",
                         start=lambda: _logging(comm, verbose))
     finally:
-        lock.release_all()
-    comm.barrier()
-    data = json.loads((outdir / "study.json").read_text())
+        _finish(comm)
+    data = _read_on_rank0(comm, lambda: json.loads((outdir / "study.json").read_text()))
     return Study(outdir, data["title"], data["parameter"], data["rows"])
 
 
 def _values(values) -> str | None:
     if values is None:
         return None
+    if isinstance(values, str | bytes) or not len(values):
+        raise ConfigError("values", f"= {values!r}; allowed: a non-empty list of values")
     return ",".join(config.toml_value(v) for v in values)
 
 

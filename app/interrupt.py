@@ -18,6 +18,13 @@ _received = 0  # the signal this process received and has not yet agreed on (0: 
 agreed = 0  # the signal the ranks agreed on in the last check that found one (0: none); read by the CLI
 
 
+def reset() -> None:
+    """Forget a signal already handled: a process that goes on after an interrupted run (a Python script or
+    a notebook calling :mod:`app.api` again) starts its next run without it."""
+    global _received, agreed
+    _received = agreed = 0
+
+
 def _handler(signum, frame) -> None:
     global _received
     _received = max(_received, signum)

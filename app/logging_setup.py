@@ -8,15 +8,18 @@ import sys
 LOGGER_NAME = "hydrobuckle"
 
 
-def setup(comm, level: int = logging.INFO) -> logging.Logger:
-    # The JIT's build step (setuptools) lowers the root logger's level to INFO and would call
-    # basicConfig; a root handler of our own, filtering at WARNING, keeps its chatter out.
-    root = logging.getLogger()
-    root.setLevel(logging.WARNING)
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setLevel(logging.WARNING)
-    handler.setFormatter(logging.Formatter("%(levelname)s:%(name)s: %(message)s"))
-    root.handlers = [handler]
+def setup(comm, level: int = logging.INFO, root: bool = True) -> logging.Logger:
+    """hydrobuckle's logger: its lines on rank 0 at ``level``, nothing on the other ranks. ``root``: also
+    take over the root logger (the command line); the Python API leaves the caller's logging as it is."""
+    if root:
+        # The JIT's build step (setuptools) lowers the root logger's level to INFO and would call
+        # basicConfig; a root handler of our own, filtering at WARNING, keeps its chatter out.
+        root_logger = logging.getLogger()
+        root_logger.setLevel(logging.WARNING)
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setLevel(logging.WARNING)
+        handler.setFormatter(logging.Formatter("%(levelname)s:%(name)s: %(message)s"))
+        root_logger.handlers = [handler]
     for noisy in ("FFCx", "UFL", "ffcx", "dolfinx"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
     log = logging.getLogger(LOGGER_NAME)

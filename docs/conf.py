@@ -56,7 +56,10 @@ def _local_mathjax() -> str | None:
         return None
     static = DOCS / "_build" / "_static_mathjax"
     target = static / "mathjax"
-    if not (target / "MathJax.js").is_file():
+    stamp = target / ".copied-from"
+    source = f"{_MATHJAX} {(_MATHJAX / 'MathJax.js').stat().st_mtime}"
+    if not stamp.is_file() or stamp.read_text() != source:  # copied whole, or again after an update
+        shutil.rmtree(static, ignore_errors=True)
         for part in _MATHJAX_PARTS:
             src, dst = (_MATHJAX / part).resolve(), target / part
             if src.is_dir():
@@ -64,6 +67,7 @@ def _local_mathjax() -> str | None:
             elif src.is_file():
                 dst.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(src, dst)
+        stamp.write_text(source)  # last: an interrupted copy has none and is made again
     html_static_path.append(str(static))
     return "mathjax/MathJax.js?config=TeX-AMS_CHTML"
 

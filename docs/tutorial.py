@@ -37,7 +37,7 @@ import app as hb
 REPO = Path(hb.__file__).resolve().parent.parent
 cfg = hb.load_config(REPO / "configs" / "bilayer.toml", {
     "mesh.element_size": 0.016,        # coarse: 4x the paper's element size (0.004 mm)
-    "mesh.film_layers": 2,             # the paper's mesh: 8 element layers through the film
+    "mesh.film_layers": 2,             # element layers through the film (the paper's mesh: 8)
     "output.fields": False,            # no ParaView files for this page
 })
 print(cfg["geometry"])

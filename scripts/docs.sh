@@ -2,10 +2,10 @@
 # Build the documentation site (docs/ -> docs/_build/html) with warnings as errors, then check the built
 # home page and a generated reference page in a headless browser (Debian's chromium; scripts/docs_check.py).
 # Installs what is missing: hydrobuckle (scripts/install.sh), the docs' tools into the venv
-# (scripts/docs-requirements.txt, from PyPI), MathJax and chromium (apt). The getting-started demo
-# (docs/demos/*.py) is executed during the build, on a small mesh.
+# (scripts/docs-requirements.txt, from PyPI), MathJax and chromium (apt). The tutorial (docs/tutorial.py)
+# is executed during the build, on a small mesh.
 #   HYDROBUCKLE_DOCS_EXECUTE=0   do not execute the demos (a quick look at the text; not what CI runs)
-#   HYDROBUCKLE_DOCS_NO_BROWSER=1  skip the browser check
+#   HYDROBUCKLE_DOCS_NO_BROWSER=1  skip the browser check (any other value: checked)
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
@@ -34,7 +34,7 @@ fi
 # Debian packages of the site: MathJax (formulas render offline; docs/conf.py copies its parts into the
 # site) and chromium with a font for the browser check
 debs=(libjs-mathjax)
-[ -n "${HYDROBUCKLE_DOCS_NO_BROWSER:-}" ] || debs+=(chromium fonts-dejavu-core)
+[ "${HYDROBUCKLE_DOCS_NO_BROWSER:-0}" = 1 ] || debs+=(chromium fonts-dejavu-core)
 missing=()
 for p in "${debs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -51,7 +51,7 @@ rm -rf docs/_build/html docs/_build/jupyter_execute
 echo "docs: sphinx-build -W (warnings are errors)"
 "$py" -m sphinx -W --keep-going -q -b html docs docs/_build/html
 echo "docs: built docs/_build/html ($(( $(date +%s) - start )) s)"
-if [ -z "${HYDROBUCKLE_DOCS_NO_BROWSER:-}" ]; then
+if [ "${HYDROBUCKLE_DOCS_NO_BROWSER:-0}" != 1 ]; then
   "$py" scripts/docs_check.py docs/_build/html index.html reference/generated/config.html \
     reference/generated/cli.html reference/api.html tutorial.html model.html
 fi

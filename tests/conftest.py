@@ -178,8 +178,8 @@ def log_lines(monkeypatch):
 
     setup = logging_setup.setup
 
-    def setup_and_attach(comm, level=logging.INFO):
-        setup(comm, level)
+    def setup_and_attach(comm, level=logging.INFO, **kw):
+        setup(comm, level, **kw)
         return attach()
 
     monkeypatch.setattr(logging_setup, "setup", setup_and_attach)

@@ -9,7 +9,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from conftest import EXE, REPO, child_env, child_jobs, rank_local, read_json
+from conftest import EXE, MPIRUN, REPO, child_env, child_jobs, rank_local, read_json, same_summary
 from mpi4py import MPI
 
 import app as hb
@@ -100,8 +100,9 @@ def test_run_returns_what_the_cli_writes(shared_tmp, comm):
     result = hb.run(hb.load_config(path), shared_tmp / "api")
     ref = read_json(shared_tmp / "cli" / "summary.json")
     s = result.summary
-    assert s == read_json(shared_tmp / "api" / "summary.json")
     assert s["status"] == ref["status"] == "buckled"
+    same_summary(ref, s, rel=1e-12)
+    assert s["config"] == ref["config"]
     for key in ("growth_um", "time", "wrinkle_count"):
         assert s["critical"][key] == pytest.approx(ref["critical"][key], rel=1e-12)
     assert (s["critical"]["discretization_error"]["total_um"]
@@ -126,16 +127,15 @@ def test_run_returns_what_the_cli_writes(shared_tmp, comm):
 @child_jobs
 @pytest.mark.slow
 def test_a_script_under_mpirun_gets_the_same_answer_on_every_rank(tmp_path):
-    """``mpirun -n 2 python script.py`` calling ``hb.run``: each rank prints the same g_c, equal to a
-    serial ``hydrobuckle run`` of the config within the 1 = 2 ranks tolerance (1e-6, tests/test_parallel.py)."""
-    from conftest import launcher_quiet
-
+    """``mpirun -n 2 python script.py`` calling ``hb.run``: both ranks return an answer (rank 0 read it and
+    shared it), equal to a serial ``hydrobuckle run`` of the config within the 1 = 2 ranks tolerance (1e-6,
+    tests/test_parallel.py)."""
     path = _small(tmp_path)
     script = tmp_path / "script.py"
     script.write_text("import json, sys\nimport app as hb\n"
                       f"r = hb.run(hb.load_config({str(path)!r}), {str(tmp_path / 'mpi')!r})\n"
                       "print('RESULT', json.dumps([r.g_c_um, r.N_c, r.status]), flush=True)\n")
-    proc = subprocess.run(["mpirun", "-n", "2", *launcher_quiet(), str(Path(EXE).parent / "python"), str(script)],
+    proc = subprocess.run([*MPIRUN, str(Path(EXE).parent / "python"), str(script)],
                           env=child_env(), cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     answers = [json.loads(line.split(" ", 1)[1]) for line in proc.stdout.splitlines() if line.startswith("RESULT")]
@@ -168,3 +168,74 @@ def test_reduced_and_a_reduced_sweep_are_the_commands(shared_tmp):
     assert st.results[1].g_c_um < st.results[0].g_c_um  # a stiffer film wrinkles earlier (paper's trend)
     assert "study.csv" in st.files
     assert set(hb.studies()) >= {"bilayer-modulus-ratio", "tube-film-thickness"}
+
+
+def test_a_failed_run_is_a_result_with_its_status_and_history(shared_tmp):
+    """A run that stops on ``time.max_steps`` (a solver-side end, exit code 1 in the CLI) returns, with no
+    exception, a Result saying ``failed`` with no g_c, and the steps it computed (1 and 2 ranks)."""
+    cfg = hb.load_config(_small(shared_tmp), {"time.max_steps": 3, "stability.error_estimate": False,
+                                              "reduced.beside_2d": False})
+    r = hb.run(cfg, shared_tmp / "failed")
+    assert r.status == "failed" and r.g_c_um is None and r.g_c_error_um is None
+    assert list(r.history["step"]) == [0, 1, 2, 3]
+    assert "max_steps" in r.summary["message"]
+
+
+def test_an_interrupted_run_raises_keyboardinterrupt_and_the_next_one_starts_afresh(shared_tmp, monkeypatch):
+    """SIGINT after the second step (sent by the process to itself, on every rank): the run stops there with
+    summary.json ``interrupted`` and its checkpoint, and ``hb.run`` raises KeyboardInterrupt so a script
+    stops too; the next call in the same process runs to its onset (the signal is not carried over), equal to
+    a run never interrupted."""
+    import os
+    import signal
+
+    from app.workflows import pipeline
+
+    cfg = hb.load_config(_small(shared_tmp), {"stability.error_estimate": False, "reduced.beside_2d": False})
+    real = pipeline.run_case
+
+    def interrupting(cfg, outdir, comm, progress=True, resume=None, monitor=None):
+        def kill(rec):
+            if rec.step == 2:
+                os.kill(os.getpid(), signal.SIGINT)
+        return real(cfg, outdir, comm, progress=progress, resume=resume, monitor=kill)
+
+    monkeypatch.setattr(pipeline, "run_case", interrupting)
+    with pytest.raises(KeyboardInterrupt, match="SIGINT"):
+        hb.run(cfg, shared_tmp / "stopped")
+    s = read_json(shared_tmp / "stopped" / "summary.json")
+    assert s["status"] == "interrupted" and s["steps"] == 2
+    monkeypatch.setattr(pipeline, "run_case", real)
+    again = hb.run(cfg, shared_tmp / "again")
+    ref = hb.run(cfg, shared_tmp / "ref")
+    assert again.status == "buckled" and again.g_c_um == ref.g_c_um
+
+
+@rank_local
+def test_an_interrupted_reduction_leaves_no_earlier_answer_behind(tmp_path):
+    """A 1D reduction stopped before its end, in a directory that holds an earlier answer: that answer's files
+    are gone (a stale summary.json would pass for the new config's), so ``load_result`` refuses the
+    directory."""
+    from app.reduced.solve import Interrupted
+    from app.workflows import reduced
+
+    cfg = hb.load_config(_small(tmp_path))
+    hb.run_reduced(cfg, tmp_path / "r")
+    assert (tmp_path / "r" / "summary.json").is_file()
+    with pytest.raises(Interrupted):
+        reduced.run(hb.load_config(_small(tmp_path), {"material.film.modulus_ratio": 20}), tmp_path / "r",
+                    stop=lambda: True)
+    assert not any((tmp_path / "r" / name).exists() for name in ("summary.json", "margin.csv", "history.csv"))
+    with pytest.raises(FileNotFoundError, match="no summary.json"):
+        hb.load_result(tmp_path / "r")
+
+
+@rank_local
+def test_overrides_and_values_that_cannot_be_set_are_config_errors(tmp_path):
+    path = _small(tmp_path)
+    assert hb.load_config(path, "time.end=1.5")["time"]["end"] == 1.5  # one KEY=VALUE string
+    with pytest.raises(hb.ConfigError, match="time.end"):
+        hb.load_config(path, {"time.end": None})
+    with pytest.raises(hb.ConfigError, match="values"):
+        hb.sweep(path, "material.film.modulus_ratio", [], tmp_path / "s", reduced=True)
+    assert not (tmp_path / "s").exists()

@@ -69,12 +69,14 @@ def test_readme_more_commands_run_as_written(tmp_path):
     from app.workflows.studies import STUDIES
 
     cwd, env = _workdir(tmp_path)
-    lines = [ln.split("#")[0].strip() for ln in block("readme:more", "bash").strip().splitlines()]
+    lines = [ln.split("#")[0].strip() for ln in block("readme:more", "bash").splitlines()]
+    lines = [ln for ln in lines if ln]
     outputs = {}
     for line in lines:
         proc = _bash(f"source .venv/bin/activate\n{line}", cwd, env)
         assert proc.returncode == 0 and "Traceback" not in proc.stderr, (line, proc.stdout[-2000:], proc.stderr[-2000:])
-        outputs[line.split()[1]] = proc.stdout
+        outputs.setdefault(line.split()[1], "")
+        outputs[line.split()[1]] += proc.stdout
     reduced_dir = cwd / re.search(r"-o (\S+)", next(ln for ln in lines if " reduced " in ln)).group(1)
     s = read_json(reduced_dir / "summary.json")
     assert s["solver"] == "reduced-1d" and s["reduced"]["kind"] == "wrinkles"

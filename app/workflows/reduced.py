@@ -170,9 +170,15 @@ def compare(summary: dict) -> str:
 # --- the command ---------------------------------------------------------------------------------------
 
 
+OUTPUTS = ("summary.json", "margin.csv", "history.csv", "margin.png", "config.toml")
+
+
 def run(cfg: dict, outdir: Path, stop=None) -> dict:
-    """``hydrobuckle reduced``: config.toml, margin.csv, history.csv, margin.png and summary.json (last)."""
+    """``hydrobuckle reduced``: config.toml, margin.csv, history.csv, margin.png and summary.json (last).
+    An earlier result's files go first, so a run that does not finish never leaves one that looks it."""
     outdir.mkdir(parents=True, exist_ok=True)
+    for name in OUTPUTS:
+        (outdir / name).unlink(missing_ok=True)
     (outdir / "config.toml").write_text(config.dumps(cfg))
     block = compute(cfg, stop=stop)
     est = block.pop("_estimate")

@@ -88,7 +88,6 @@ def cli_page() -> str:
     from app.cli.parser import parser
 
     p = parser()
-    p.formatter_class = argparse.HelpFormatter
     helps = _helps(p)
     lines = ["# Command line", "",
              "Generated from the argument parser (`app/cli/parser.py`). `hydrobuckle COMMAND --help` prints",
@@ -101,6 +100,8 @@ def cli_page() -> str:
     lines += [f"| [`{name}`](#hydrobuckle-{name}) | {_cell(helps.get(name, ''))} |" for name in subs]
     for name, sub in subs.items():
         sub.prog = f"hydrobuckle {name}"
+        # a fixed width: the page must not depend on the terminal it was built in ($COLUMNS)
+        sub.formatter_class = lambda prog: argparse.HelpFormatter(prog, width=100)
         lines += ["", f"(hydrobuckle-{name})=", f"## `hydrobuckle {name}`", "", helps.get(name, "") + ".", "",
                   "```text", sub.format_help().rstrip(), "```"]
     return "\n".join(lines) + "\n"
