@@ -89,3 +89,31 @@ element_size = 0.005
 film_layers = 2
 substrate_grading = 1.25
 """
+
+
+# conftest.small_bilayer's geometry and mesh as a file, with the error estimate and a coarse 1D counterpart
+# beside it (tests/test_api.py compares the API with the CLI on it, not the answer's accuracy).
+API_BILAYER_TOML = """
+[geometry]
+length = 0.1
+substrate_thickness = 0.05
+film_thickness = 0.01
+[mesh]
+element_size = 0.01
+film_layers = 2
+substrate_grading = 1.3
+[material.film]
+modulus_ratio = 8.0
+[time]
+end = 2.0
+dt_initial = 0.01
+dt_max = 0.1
+[stability]
+error_estimate = true
+[reduced]   # a coarse 1D reduction: these tests compare the API with the CLI, not the answer's accuracy
+beside_2d = true
+degree = 2
+film_cells = 4
+grid = 16
+max_wavenumber = 5
+"""

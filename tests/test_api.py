@@ -9,42 +9,18 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from cases import API_BILAYER_TOML
 from conftest import EXE, MPIRUN, REPO, child_env, child_jobs, rank_local, read_json, same_summary
 from mpi4py import MPI
 
 import app as hb
 from app import cli, config
 
-SMALL = """
-[geometry]
-length = 0.1
-substrate_thickness = 0.05
-film_thickness = 0.01
-[mesh]
-element_size = 0.01
-film_layers = 2
-substrate_grading = 1.3
-[material.film]
-modulus_ratio = 8.0
-[time]
-end = 2.0
-dt_initial = 0.01
-dt_max = 0.1
-[stability]
-error_estimate = true
-[reduced]   # a coarse 1D reduction: these tests compare the API with the CLI, not the answer's accuracy
-beside_2d = true
-degree = 2
-film_cells = 4
-grid = 16
-max_wavenumber = 5
-"""
-
 
 def _small(dirpath):
     path = dirpath / "small.toml"
     if MPI.COMM_WORLD.rank == 0:
-        path.write_text(SMALL)
+        path.write_text(API_BILAYER_TOML)
     MPI.COMM_WORLD.barrier()
     return path
 
