@@ -187,6 +187,16 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
+def leaves(table: dict | None = None, prefix: str = ""):
+    """Every key of ``table`` (default: the whole :func:`schema`) as (dotted name, :class:`~app.schema.Key`),
+    in the order a resolved config lists them (the docs' reference page, the bad-input sweep)."""
+    for name, spec in (schema() if table is None else table).items():
+        if isinstance(spec, dict):
+            yield from leaves(spec, f"{prefix}{name}.")
+        else:
+            yield f"{prefix}{name}", spec
+
+
 def defaults() -> dict:
     """The default configuration (geometry keys unset until the kind's defaults are applied)."""
     return _defaults(schema())

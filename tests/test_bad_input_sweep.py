@@ -33,19 +33,11 @@ COMPANIONS = {
 }
 
 
-def _leaves(table: dict, prefix: str = ""):
-    for name, spec in table.items():
-        if isinstance(spec, dict):
-            yield from _leaves(spec, f"{prefix}{name}.")
-        else:
-            yield f"{prefix}{name}", spec
-
-
 def _spec_contexts():
     """(dotted key, spec, base user config) for every key; a geometry key once for every kind that
     uses it, with that kind's own spec."""
     sch = config.SCHEMA
-    for dotted, spec in _leaves(sch):
+    for dotted, spec in config.leaves(sch):
         if dotted.startswith("geometry.") and dotted != "geometry.kind":
             name = dotted.split(".", 1)[1]
             for kind in config._kinds():
@@ -130,7 +122,7 @@ BAD, GOOD = _cases()
 
 def test_the_sweep_covers_every_key():
     keys = {d for _, d, _, _ in _spec_contexts()}
-    assert keys == {d for d, _ in _leaves(config.SCHEMA)}
+    assert keys == {d for d, _ in config.leaves(config.SCHEMA)}
     assert {d for _, d, _ in BAD} == keys  # every key has at least a wrong-type case
     assert len(BAD) >= 200 and len(GOOD) >= 30, (len(BAD), len(GOOD))
 

@@ -12,19 +12,11 @@ from pathlib import Path
 GENERATED = Path(__file__).resolve().parent.parent / "reference" / "generated"
 
 
-def _walk(table: dict, prefix: str = ""):
-    for name, spec in table.items():
-        if isinstance(spec, dict):
-            yield from _walk(spec, f"{prefix}{name}.")
-        else:
-            yield prefix + name, spec
-
-
 def schema_keys() -> list[tuple[str, object]]:
     """Every key of the config schema as (dotted name, :class:`app.schema.Key`), in the resolved order."""
     from app import config
 
-    return list(_walk(config.schema()))
+    return list(config.leaves())
 
 
 def _cell(text) -> str:
