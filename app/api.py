@@ -98,21 +98,17 @@ def _finish(comm) -> None:
     """After a command: the locks released; a SIGINT/SIGTERM that stopped it (its summary says
     ``interrupted`` and the run can be resumed) is raised as KeyboardInterrupt, so a script or notebook stops
     too, and is forgotten so that the next call starts afresh."""
+    from mpi4py import MPI
+
     from app import interrupt
     from app.io import lock
 
     lock.release_all()
-    signal_number = interrupt.agreed or comm.allreduce(interrupt._received, op=_max_op())
+    signal_number = interrupt.agreed or comm.allreduce(interrupt._received, op=MPI.MAX)
     interrupt.reset()
     if signal_number:
         raise KeyboardInterrupt(f"hydrobuckle: interrupted by {interrupt.name(signal_number)}; what was computed "
                                 "is kept (run: summary.json says 'interrupted', run --resume continues)")
-
-
-def _max_op():
-    from mpi4py import MPI
-
-    return MPI.MAX
 
 
 def _read_csv(path: Path) -> dict[str, Any]:
