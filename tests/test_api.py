@@ -68,22 +68,24 @@ def test_bad_input_raises_before_any_directory_exists(shared_tmp):
 
 def test_run_returns_what_the_cli_writes(shared_tmp, comm):
     """``hb.run`` and ``hydrobuckle run`` (cli.main in the same process, the same ranks) on one config:
-    the same summary (every number to 1e-12: the same computation), the same history; the Result's
+    the same summary (every number to 1e-12 serially: the same computation; 1e-10 on 2 ranks, where MUMPS'
+    parallel factorization is not bitwise repeatable), the same history; the Result's
     g_c, error bar, N_c, time and 1D counterpart are the summary's, its history the CSV's columns, its
     files the directory's."""
+    rel = 1e-12 if comm.size == 1 else 1e-10
     path = _small(shared_tmp)
     assert cli.main(["run", str(path), "-o", str(shared_tmp / "cli"), "-q"]) == 0
     result = hb.run(hb.load_config(path), shared_tmp / "api")
     ref = read_json(shared_tmp / "cli" / "summary.json")
     s = result.summary
     assert s["status"] == ref["status"] == "buckled"
-    same_summary(ref, s, rel=1e-12)
+    same_summary(ref, s, rel=rel)
     assert s["config"] == ref["config"]
     for key in ("growth_um", "time", "wrinkle_count"):
-        assert s["critical"][key] == pytest.approx(ref["critical"][key], rel=1e-12)
+        assert s["critical"][key] == pytest.approx(ref["critical"][key], rel=rel)
     assert (s["critical"]["discretization_error"]["total_um"]
-            == pytest.approx(ref["critical"]["discretization_error"]["total_um"], rel=1e-12))
-    assert s["reduced"]["growth_um"] == pytest.approx(ref["reduced"]["growth_um"], rel=1e-12)
+            == pytest.approx(ref["critical"]["discretization_error"]["total_um"], rel=rel))
+    assert s["reduced"]["growth_um"] == pytest.approx(ref["reduced"]["growth_um"], rel=rel)
 
     assert result.g_c_um == s["critical"]["growth_um"]
     assert result.g_c_error_um == s["critical"]["discretization_error"]["total_um"]
@@ -94,7 +96,7 @@ def test_run_returns_what_the_cli_writes(shared_tmp, comm):
     with (shared_tmp / "cli" / "history.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert len(result.history["time"]) == len(rows)
-    assert result.history["growth_mm"] == pytest.approx([float(r["growth_mm"]) for r in rows], rel=1e-12)
+    assert result.history["growth_mm"] == pytest.approx([float(r["growth_mm"]) for r in rows], rel=rel)
     assert {"summary.json", "history.csv", "config.toml", "mode.png"} <= set(result.files)
     assert hb.load_result(shared_tmp / "api").summary == s
     assert f"{result.g_c_um:.4f}" in str(result)
@@ -161,7 +163,7 @@ def test_an_interrupted_run_raises_keyboardinterrupt_and_the_next_one_starts_afr
     """SIGINT after the second step (sent by the process to itself, on every rank): the run stops there with
     summary.json ``interrupted`` and its checkpoint, and ``hb.run`` raises KeyboardInterrupt so a script
     stops too; the next call in the same process runs to its onset (the signal is not carried over), equal to
-    a run never interrupted."""
+    a run never interrupted (to 1e-10)."""
     import os
     import signal
 
@@ -184,7 +186,8 @@ def test_an_interrupted_run_raises_keyboardinterrupt_and_the_next_one_starts_afr
     monkeypatch.setattr(pipeline, "run_case", real)
     again = hb.run(cfg, shared_tmp / "again")
     ref = hb.run(cfg, shared_tmp / "ref")
-    assert again.status == "buckled" and again.g_c_um == ref.g_c_um
+    # equal to roundoff: on 2 ranks MUMPS' parallel factorization is not bitwise repeatable (measured 3e-16)
+    assert again.status == ref.status == "buckled" and again.g_c_um == pytest.approx(ref.g_c_um, rel=1e-10)
 
 
 @rank_local
