@@ -27,11 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from app import config
+from app import __all__, config  # __all__: the names the package re-exports, listed once in app/__init__.py
 from app.schema import ConfigError
-
-__all__ = ["ConfigError", "Result", "Study", "load_config", "load_result", "run", "run_reduced", "studies",
-           "study", "sweep"]
 
 Overrides = Mapping[str, Any] | Sequence[str] | None
 
