@@ -58,17 +58,31 @@ def placeholder_domain():
 # --- function spaces -------------------------------------------------------------------
 
 
+#: the lowest-order Raviart-Thomas family by cell: UFL 2022 (dolfinx 0.5) names it RTCF on quadrilaterals and
+#: NCF on hexahedra; basix.ufl (0.9) takes RTCF for both
+_RT_FAMILY = {"quadrilateral": "RTCF", "hexahedron": "RTCF" if MODERN else "NCF"}
+
+
+def _raviart_thomas(cell):
+    return _element(_RT_FAMILY[cell.cellname()], cell, 1)
+
+
+def _gdim(domain) -> int:
+    return domain.geometry.dim
+
+
 def mixed_displacement_flux_space(domain):
-    """Vector Q1 displacement x RTCF1 flux (lowest-order Raviart-Thomas on quadrilaterals)."""
+    """Vector Q1 displacement x lowest-order Raviart-Thomas flux (RTCF on quadrilaterals, its hexahedral
+    counterpart in 3D: one flux dof per facet either way)."""
     cell = domain.ufl_cell()
-    return _space(domain, _mixed([_element("Lagrange", cell, 1, shape=(2,)), _element("RTCF", cell, 1)]))
+    return _space(domain, _mixed([_element("Lagrange", cell, 1, shape=(_gdim(domain),)), _raviart_thomas(cell)]))
 
 
 def mixed_displacement_content_space(domain):
     """Vector Q1 displacement x DG0 fluid content: the unknowns of the drained stability test
     (the fluid content per cell is what the divergence of an RTCF flux can change)."""
     cell = domain.ufl_cell()
-    return _space(domain, _mixed([_element("Lagrange", cell, 1, shape=(2,)), _element("DG", cell, 0)]))
+    return _space(domain, _mixed([_element("Lagrange", cell, 1, shape=(_gdim(domain),)), _element("DG", cell, 0)]))
 
 
 def mixed_lagrange_space(domain, degree: int, count: int):
@@ -132,12 +146,13 @@ def scalar_space(domain, family: str, degree: int):
 
 
 def vector_space(domain, family: str, degree: int):
-    """A 2-vector-valued space (hydrobuckle's meshes are planar)."""
-    return _space(domain, _element(family, domain.ufl_cell(), degree, shape=(2,)))
+    """A vector-valued space with as many components as the mesh has dimensions."""
+    return _space(domain, _element(family, domain.ufl_cell(), degree, shape=(_gdim(domain),)))
 
 
 def rtcf_space(domain):
-    return _space(domain, _element("RTCF", domain.ufl_cell(), 1))
+    """The flux space alone (lowest-order Raviart-Thomas on the mesh's cells)."""
+    return _space(domain, _raviart_thomas(domain.ufl_cell()))
 
 
 def collapse(subspace):
@@ -225,8 +240,8 @@ def original_node_indices(domain) -> np.ndarray:
 
 
 def node_coordinates(domain) -> np.ndarray:
-    """Coordinates (x, y) of the local geometry nodes."""
-    return domain.geometry.x[:, :2]
+    """Coordinates (x, y, and z in 3D) of the local geometry nodes."""
+    return domain.geometry.x[:, :_gdim(domain)]
 
 
 def exterior_facets(domain) -> np.ndarray:

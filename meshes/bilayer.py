@@ -54,6 +54,28 @@ def film_layer_heights(w: float, layers: int, grading: float) -> np.ndarray:
 def add_model(length: float, substrate_thickness: float, film_thickness: float, element_size: float,
               film_layers: int, grading: float, film_grading: float = 1.0) -> tuple[dict, dict, dict]:
     """Mesh the bilayer in the current gmsh model: (cell groups, facet groups, info)."""
+    base, sub, film, info = add_section(length, substrate_thickness, film_thickness, element_size, film_layers,
+                                        grading, film_grading)
+    L = length
+    sides = [abs(t) for t in (sub[2][1], sub[3][1], film[2][1], film[3][1])]
+    left = [c for c in sides if gmsh.model.getBoundingBox(1, c)[3] < 0.5 * L]
+    right = [c for c in sides if c not in left]
+    add_physical(2, [film[1][1]], CELLS["film"], "film")
+    add_physical(2, [sub[1][1]], CELLS["substrate"], "substrate")
+    add_physical(1, [base], FACETS["bottom"], "bottom")
+    add_physical(1, [film[0][1]], FACETS["top"], "top")
+    add_physical(1, left, FACETS["left"], "left")
+    add_physical(1, right, FACETS["right"], "right")
+    gmsh.option.setNumber("Mesh.RecombineAll", 1)
+    gmsh.model.mesh.generate(2)
+    return dict(CELLS), dict(FACETS), info
+
+
+def add_section(length: float, substrate_thickness: float, film_thickness: float, element_size: float,
+                film_layers: int, grading: float, film_grading: float = 1.0):
+    """The bilayer's geometry in the x-y plane of the current gmsh model, transfinite and recombined but not
+    meshed: (base line, substrate extrusion, film extrusion, info), the extrusions as gmsh returns them
+    (top curve, surface, the two side curves). The 3D plate (:mod:`meshes.plate`) extrudes it along z."""
     L, H, w = length, substrate_thickness, film_thickness
     nx = max(1, round(L / element_size))
     film_hs = film_layer_heights(w, film_layers, film_grading)
@@ -75,15 +97,4 @@ def add_model(length: float, substrate_thickness: float, film_thickness: float, 
     film_fr[-1] = 1.0
     film = geo.extrude([sub[0]], 0, w, 0, numElements=[1] * film_layers, heights=film_fr, recombine=True)
     geo.synchronize()
-    sides = [abs(t) for t in (sub[2][1], sub[3][1], film[2][1], film[3][1])]
-    left = [c for c in sides if gmsh.model.getBoundingBox(1, c)[3] < 0.5 * L]
-    right = [c for c in sides if c not in left]
-    add_physical(2, [film[1][1]], CELLS["film"], "film")
-    add_physical(2, [sub[1][1]], CELLS["substrate"], "substrate")
-    add_physical(1, [base], FACETS["bottom"], "bottom")
-    add_physical(1, [film[0][1]], FACETS["top"], "top")
-    add_physical(1, left, FACETS["left"], "left")
-    add_physical(1, right, FACETS["right"], "right")
-    gmsh.option.setNumber("Mesh.RecombineAll", 1)
-    gmsh.model.mesh.generate(2)
-    return dict(CELLS), dict(FACETS), info
+    return base, sub, film, info

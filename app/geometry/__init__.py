@@ -18,9 +18,10 @@ from app.geometry.base import (  # noqa: F401  (the package's interface)
 )
 from app.geometry.bilayer import Bilayer
 from app.geometry.msh import UserMsh
+from app.geometry.plate import Plate
 from app.geometry.tube import EllipticTube, Tube
 
-BUILTIN = (Bilayer(), Tube(), EllipticTube(), UserMsh())  # registration order = the order docs list them
+BUILTIN = (Bilayer(), Tube(), EllipticTube(), Plate(), UserMsh())  # registration order = the order docs list them
 for _kind in BUILTIN:
     KINDS.register(_kind)
 DEFAULT_KIND = "bilayer"  # the paper's film on a substrate

@@ -6,7 +6,8 @@ Boundary roles (mechanics + chemistry; which loading uses them how is :mod:`app.
 - ``permeable``: traction-free; chemical potential prescribed (the ramp), fluid enters here;
 - ``impermeable`` / ``free``: traction-free, zero normal flux;
 - ``fixed``: u = 0, zero normal flux (a rigid impermeable wall);
-- ``roller_x`` / ``roller_y``: u_x = 0 / u_y = 0, zero normal flux (symmetry or sliding support).
+- ``roller_x`` / ``roller_y`` / ``roller_z``: u_x = 0 / u_y = 0 / u_z = 0 (3D), zero normal flux (symmetry
+  or sliding support).
 
 Growth: ``mean_normal`` is the mean displacement of the permeable surface along the body's outward
 normal there (bilayer: mean u_y of the top; tube: mean inward radial displacement of the passage);
@@ -24,9 +25,9 @@ from typing import ClassVar
 from app.registry import Registry
 from app.schema import ConfigError, Key, gt, key
 
-BOUNDARY_ROLES = ("permeable", "impermeable", "free", "fixed", "roller_x", "roller_y")
-# displacement components a role holds at zero
-HELD_COMPONENTS = {"fixed": (0, 1), "roller_x": (0,), "roller_y": (1,)}
+BOUNDARY_ROLES = ("permeable", "impermeable", "free", "fixed", "roller_x", "roller_y", "roller_z")
+# displacement components a role holds at zero (a 2D mesh has components 0 and 1 only)
+HELD_COMPONENTS = {"fixed": (0, 1, 2), "roller_x": (0,), "roller_y": (1,), "roller_z": (2,)}
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ def lagrange1_dof_nodes(V) -> np.ndarray:
     size = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
     out = np.full(size, -1, dtype=np.int64)
     out[dofs.ravel()] = nodes.ravel()
-    X = V.tabulate_dof_coordinates()[:, :2]
+    X = V.tabulate_dof_coordinates()[:, :domain.geometry.dim]
     if (out < 0).any() or not np.allclose(X, compat.node_coordinates(domain)[out], rtol=0.0,
                                           atol=1e-12 * max(1.0, float(np.abs(X).max(initial=0.0)))):
         raise RuntimeError("P1 dofs and geometry nodes do not coincide")
@@ -56,24 +56,26 @@ def facet_of_dofs(V) -> np.ndarray:
 
 
 def facet_dof_normals(V) -> np.ndarray:
-    """(n_x, n_y) per local dof of a lowest-order Raviart-Thomas space: the dofs of the constant fields
-    e_x and e_y, i.e. the (length-scaled) normal each dof measures the flux along. Its sign follows the
-    facet's orientation, which dolfinx takes from the partition's global vertex numbering."""
+    """(n_x, n_y[, n_z]) per local dof of a lowest-order Raviart-Thomas space: the dofs of the constant
+    fields e_x, e_y (and e_z), i.e. the (size-scaled) normal each dof measures the flux along. Its sign follows
+    the facet's orientation, which dolfinx takes from the partition's global vertex numbering."""
     f = fem.Function(V)
+    d = V.mesh.geometry.dim
     out = []
-    for comp in range(2):
-        f.interpolate(lambda x, c=comp: np.vstack([np.full(x.shape[1], float(c == k)) for k in range(2)]))
+    for comp in range(d):
+        f.interpolate(lambda x, c=comp: np.vstack([np.full(x.shape[1], float(c == k)) for k in range(d)]))
         f.x.scatter_forward()
         out.append(f.x.array.copy())
     return np.column_stack(out)
 
 
 def facet_nodes(domain) -> np.ndarray:
-    """The two geometry nodes (vertices) of each local facet of a 2D mesh, shape (num_facets, 2)."""
+    """The geometry nodes (vertices) of each local facet, shape (num_facets, 2) on a 2D mesh, (num_facets, 4)
+    on a hexahedral one."""
     tdim = domain.topology.dim
     domain.topology.create_connectivity(tdim - 1, 0)
     domain.topology.create_connectivity(tdim, 0)
-    f2v = np.asarray(domain.topology.connectivity(tdim - 1, 0).array, dtype=np.int64).reshape(-1, 2)
+    f2v = np.asarray(domain.topology.connectivity(tdim - 1, 0).array, dtype=np.int64).reshape(-1, 2 ** (tdim - 1))
     c2v = np.asarray(domain.topology.connectivity(tdim, 0).array, dtype=np.int64).reshape(compat.num_local_cells(domain), -1)
     v2g = np.full(domain.topology.index_map(0).size_local + domain.topology.index_map(0).num_ghosts, -1, np.int64)
     v2g[c2v] = compat.cell_geometry_nodes(domain)[:, : c2v.shape[1]]  # a first-order cell's nodes are its vertices

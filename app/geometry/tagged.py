@@ -88,7 +88,8 @@ def to_dolfinx(comm, rank: int, cell_names: dict, facet_names: dict, info: dict,
     if comm.rank == rank and msh_path:
         gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
         gmsh.write(str(msh_path))
-    mesh, ct, ft = compat.gmsh_model_to_mesh(gmsh.model, comm, rank, gdim=2)
+    dim = comm.bcast(gmsh.model.getDimension() if comm.rank == rank else None, root=rank)  # 2 or 3
+    mesh, ct, ft = compat.gmsh_model_to_mesh(gmsh.model, comm, rank, gdim=dim)
     from app.geometry.quality import min_scaled_jacobian
 
     info = {**info, "min_scaled_jacobian": min_scaled_jacobian(mesh)}

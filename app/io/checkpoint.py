@@ -10,7 +10,8 @@ stopped (docs/reliability.md, "Checkpoint and restart"):
   test's volumes, Newton's residual scale), the onset tracker's state (negative-eigenvalue count,
   crossings so far, the screen's remembered states and counters) and the history.csv rows so far;
 - ``u_key``, ``x``: each mesh node's index in the mesh's input (the gmsh model) and its coordinates;
-- ``q_key``: each facet as the pair of its vertices' input indices (lo * 2^31 + hi);
+- ``q_key``: each facet as the pair of its vertices' input indices (lo * 2^31 + hi); in 3D, as its three
+  lowest vertex input indices (a, b, c: a * 2^42 + b * 2^21 + c, which names a quadrilateral face uniquely);
 - ``a0``, ``a1``, ...: the state arrays (u and the accumulated flux Q_n of each remembered state, the
   predictor's rate_u and dQ_prev), in key order, each stored once;
 - on a followed branch, ``profile_growth``, ``profile_time``, ``profile_position``, ``profile_value``: the
@@ -26,7 +27,8 @@ The arrays are stored independently of the mesh partition: displacement dofs key
 index of their vertex, the RTCF flux dofs (one per facet) by their facet's vertex pair. A flux dof's
 sign depends on the facet orientation dolfinx takes from the partition's global vertex numbering, so
 the stored value is the flux along a canonical normal: the facet's tangent from its vertex with the
-lower input index to the higher, turned by -90 degrees. A restart may therefore use any number of
+lower input index to the higher, turned by -90 degrees (in 3D: (X_b - X_a) x (X_c - X_a) of its three lowest
+vertices). A restart may therefore use any number of
 ranks; the mesh is rebuilt from the same config (gmsh on one rank: the same input nodes) and checked
 against the stored coordinates.
 """
@@ -48,6 +50,7 @@ from app.geometry import dofmaps
 FILE = "checkpoint.npz"
 FORMAT = 1
 KEY_BASE = 1 << 31  # a facet's key: lo * KEY_BASE + hi (input node indices < 2^31)
+KEY_BASE_3D = 1 << 21  # in 3D: (a * KEY_BASE_3D + b) * KEY_BASE_3D + c (input node indices < 2^21)
 # the branch's surface profiles (app.model.surface.SurfaceProfiles.arrays) and their members in the file
 PROFILE_MEMBERS = {"growth_mm": "profile_growth", "time": "profile_time", "position": "profile_position",
                    "profile": "profile_value"}
@@ -147,18 +150,24 @@ class DofLayout:
     def _build(self, problem):
         p = problem
         orig = compat.original_node_indices(p.domain)
-        if orig.size and orig.max() >= KEY_BASE:
-            raise RuntimeError(f"input node index {orig.max()} >= 2^31: facet keys would overflow")
+        self.dim = p.domain.geometry.dim
+        limit = KEY_BASE if self.dim == 2 else KEY_BASE_3D
+        if orig.size and orig.max() >= limit:
+            raise RuntimeError(f"input node index {orig.max()} >= {limit}: facet keys would overflow")
         X = compat.node_coordinates(p.domain)
         nodes = dofmaps.lagrange1_dof_nodes(p.V_u)  # per local displacement block
         self.u_key, self.u_x = orig[nodes], X[nodes]
-        ends = dofmaps.facet_nodes(p.domain)[dofmaps.facet_of_dofs(p.V_q)]  # (n_q, 2) geometry nodes
-        swap = orig[ends[:, 0]] > orig[ends[:, 1]]
-        lo = np.where(swap, ends[:, 1], ends[:, 0])
-        hi = np.where(swap, ends[:, 0], ends[:, 1])
-        self.q_key = orig[lo] * KEY_BASE + orig[hi]
-        t = X[hi] - X[lo]
-        canonical = np.column_stack([t[:, 1], -t[:, 0]])
+        ends = dofmaps.facet_nodes(p.domain)[dofmaps.facet_of_dofs(p.V_q)]  # (n_q, 2 or 4) geometry nodes
+        ends = np.take_along_axis(ends, np.argsort(orig[ends], axis=1), axis=1)  # by input index
+        if self.dim == 2:
+            lo, hi = ends[:, 0], ends[:, 1]
+            self.q_key = orig[lo] * KEY_BASE + orig[hi]
+            t = X[hi] - X[lo]
+            canonical = np.column_stack([t[:, 1], -t[:, 0]])
+        else:
+            a, b, c = ends[:, 0], ends[:, 1], ends[:, 2]
+            self.q_key = (orig[a] * KEY_BASE_3D + orig[b]) * KEY_BASE_3D + orig[c]
+            canonical = np.cross(X[b] - X[a], X[c] - X[a])
         n_dof = dofmaps.facet_dof_normals(p.V_q)
         dot = np.einsum("ij,ij->i", n_dof, canonical)
         if (np.abs(dot) < 0.5 * np.linalg.norm(n_dof, axis=1) * np.linalg.norm(canonical, axis=1)).any():
@@ -175,7 +184,7 @@ class DofLayout:
 
     # local arrays -> owned canonical parts
     def u_part(self, u_unrolled: np.ndarray) -> np.ndarray:
-        return np.asarray(u_unrolled).reshape(-1, 2)[: self.nu]
+        return np.asarray(u_unrolled).reshape(-1, self.dim)[: self.nu]
 
     def q_part(self, q: np.ndarray) -> np.ndarray:
         return (np.asarray(q) * self.q_sign)[: self.nq]
@@ -435,10 +444,11 @@ def _read(path: Path, cfg: dict) -> tuple[dict, dict | None]:
                 raise ValueError(f"format {meta.get('format') if isinstance(meta, dict) else '?'}, not {FORMAT}")
             arrays = {name: z[name] for name in z.files if name != "meta"}  # reads all: CRC checked
         n, m = arrays["u_key"].size, arrays["q_key"].size
-        if arrays["x"].shape != (n, 2):
+        d = arrays["x"].shape[1] if arrays["x"].ndim == 2 else 0
+        if arrays["x"].shape != (n, d) or d not in (2, 3):
             raise ValueError("node coordinates do not match the node keys")
         for s in meta["snapshots"]:
-            for field, shape in (("state_u", (n, 2)), ("state_q", (m,)), ("rate_u", (n, 2)), ("dQ_prev", (m,))):
+            for field, shape in (("state_u", (n, d)), ("state_q", (m,)), ("rate_u", (n, d)), ("dQ_prev", (m,))):
                 if arrays[s[field]].shape != shape:
                     raise ValueError(f"array {s[field]} has shape {arrays[s[field]].shape}, not {shape}")
         for key in ("result_hash", "inputs", "t", "step", "current", "stepper", "tracker", "rows"):

@@ -267,29 +267,35 @@ class ResultWriter:
                 f.write([base, mode], crossing.time)
         except ResultWriteError as err:
             self._record(err)
-        polys = _gather_cells(problem, base.x.array, mode.x.array)
+        three_d = problem.domain.geometry.dim == 3
+        polys = None if three_d else _gather_cells(problem, base.x.array, mode.x.array)
         from app.model.surface import boundary_displacement, shape_of
 
         groups = problem.geo.facets_with_role("permeable")
         coords, disp = boundary_displacement(problem, crossing.mode, groups)
         _, state_disp = boundary_displacement(problem, crossing.state, groups)
         surface = self.outdir / "mode_surface.csv"  # the surface data the study galleries draw from
+        axes = "xyz"[:coords.shape[1]]
+        header = ",".join([*axes, *(f"mode_u{a}" for a in axes), *(f"state_u{a}" for a in axes)])
         try:
             writes.on_rank0(self.comm, surface, writes.replace_file, surface, lambda tmp: np.savetxt(
-                tmp, np.column_stack([coords, disp, state_disp]), delimiter=",",
-                header="x,y,mode_ux,mode_uy,state_ux,state_uy", comments=""))
+                tmp, np.column_stack([coords, disp, state_disp]), delimiter=",", header=header, comments=""))
         except ResultWriteError as err:
             self._record(err)
         shape = shape_of(problem)
         position, normal = shape.plotted(coords, disp)
         profile = (position, normal / (np.abs(normal).max() or 1.0), shape.position_label, "normal mode displacement")
         if self.settings.plot:
-            from app.io.plots import mode_plot
+            from app.io.plots import mode_map_plot, mode_plot
 
             png = self.outdir / "mode.png"
             try:
-                writes.on_rank0(self.comm, png, writes.replace_file, png,
-                                lambda tmp: mode_plot(polys, profile, problem.geo, crossing, tmp))
+                if three_d:  # the surface from above: its normal mode displacement as a colour map
+                    writes.on_rank0(self.comm, png, writes.replace_file, png,
+                                    lambda tmp: mode_map_plot(profile, crossing, tmp))
+                else:
+                    writes.on_rank0(self.comm, png, writes.replace_file, png,
+                                    lambda tmp: mode_plot(polys, profile, problem.geo, crossing, tmp))
             except ResultWriteError as err:
                 self._record(err)
 

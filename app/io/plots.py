@@ -88,6 +88,25 @@ def mode_plot(polys, profile, geo, crossing, path) -> None:
     plt.close(fig)
 
 
+def mode_map_plot(profile, crossing, path) -> None:
+    """A 3D run's mode seen from above: the permeable surface's normal mode displacement over its two in-plane
+    coordinates (``profile``: (positions (N, 2), normalized values, labels)) as a colour map."""
+    position, value, _, _ = profile
+    fig, ax = plt.subplots(figsize=(6.4, 5.6))
+    tpc = ax.tricontourf(position[:, 0], position[:, 1], value, levels=21, cmap="RdBu_r", vmin=-1.0, vmax=1.0)
+    fig.colorbar(tpc, ax=ax, label="normal mode displacement (max 1)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("z [mm]")
+    waves = ", ".join(f"{m['wave_vector']}" for m in crossing.modes[:crossing.multiplicity] if "wave_vector" in m)
+    ax.set_title(f"g_c = {1e3 * crossing.growth_mm:.3f} um, t_c = {crossing.time:.4f} s, N_c = "
+                 f"{crossing.wrinkle_count:.4g}\ncritical half-waves (m, n): {waves or '?'}"
+                 f" (multiplicity {crossing.multiplicity}); first mode shown", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
 def convergence_plot(rows: list[dict], report: dict, path) -> None:
     """g_c against the refinement parameter per study, and the estimated error (log-log)."""
     import numpy as np

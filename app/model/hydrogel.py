@@ -1,8 +1,9 @@
 """The seed paper's hydrogel law (eqs. 3.1-3.6): neo-Hookean network, Flory-Rehner mixing, penalized
 molecular incompressibility J J0 = 1 + s, and the quadratic dissipation of Fickian diffusion.
 
-Free energy per unit preswollen reference volume, plane strain (F:F(3D) = F:F(2D) + 1, J = det F(2D)),
-with the three-dimensional isotropic preswelling F0 = J0^(1/3) 1:
+Free energy per unit preswollen reference volume, with the three-dimensional isotropic preswelling
+F0 = J0^(1/3) 1; F is 3x3 on a 3D mesh, and in plane strain the 2x2 in-plane part (F:F(3D) = F:F(2D) + 1,
+J = det F(2D)): one law for both, the 2D case being the 3D one with F33 = 1:
 
     psi = gamma/(2 J0) [J0^(2/3) F:F - 3 - 2 ln(J J0)] + alpha/J0 [s ln(s/(1+s)) + chi s/(1+s)]
           + eps/(2 J0) (J J0 - 1 - s)^2
@@ -34,7 +35,7 @@ class HydrogelLaw(MaterialLaw):
         constraint (eq. 3.4)."""
         g, a, e, J0, chi = p.shear_modulus, p.mixing_modulus, p.penalty, p.preswelling, p.interaction
         J = ufl.det(F)
-        FF = ufl.inner(F, F) + 1.0  # out-of-plane stretch 1
+        FF = ufl.inner(F, F) + (3 - ufl.shape(F)[0])  # plane strain: the out-of-plane stretch 1 adds 1
         psi_mech = g / (2 * J0) * (J0 ** (2.0 / 3.0) * FF - 3 - 2 * ufl.ln(J * J0))
         psi_chem = a / J0 * (s * ufl.ln(s / (1 + s)) + chi * s / (1 + s))
         psi_coup = e / (2 * J0) * (J * J0 - 1 - s) ** 2
@@ -44,8 +45,8 @@ class HydrogelLaw(MaterialLaw):
         """tau * phi(H = dQ/tau; C_n, s_n) of eq. 3.4 written in the flux increment dQ = tau H.
 
         phi = C_n:(H x H) / (2 J0^(1/3) M s_n); with H = dQ/tau this is C_n:(dQ x dQ)/(2 tau J0^(1/3) M s_n).
-        ``C_n`` is the 2x2 in-plane right Cauchy-Green tensor of the previous step (the flux is
-        in-plane, so the out-of-plane entry never enters)."""
+        ``C_n`` is the right Cauchy-Green tensor of the previous step (in plane strain its 2x2 in-plane
+        part: the flux is in-plane, so the out-of-plane entry never enters)."""
         J0, M = p.preswelling, p.mobility
         return ufl.inner(C_n * dQ, dQ) / (2 * tau * J0 ** (1.0 / 3.0) * M * s_n)
 

@@ -24,7 +24,8 @@ from app.schema import Key, gt, in_closed, in_open, key
 class BoundaryConditions:
     """The conditions of a loading on named facet groups."""
 
-    held: tuple[tuple[str, ...], ...]  # per displacement component: facet groups where it is zero
+    held: tuple[tuple[str, ...], ...]  # per displacement component x, y, z: facet groups where it is zero (a 2D
+    # mesh has no z)
     driven: Drive | None = None  # the facet group whose component follows applied_displacement(t)
     flux_open: tuple[str, ...] | None = ()  # groups free of the no-flux condition (every other exterior facet
     # has zero normal flux); None: diffusion off, every flux dof zero (s stays s0)
@@ -92,7 +93,7 @@ def _with_role(boundaries: dict[str, str], *roles: str) -> tuple[str, ...]:
 
 def _held(boundaries: dict[str, str], except_: tuple[str, int] | None = None) -> tuple[tuple[str, ...], ...]:
     return tuple(tuple(g for g, role in boundaries.items()
-                       if c in HELD_COMPONENTS.get(role, ()) and (g, c) != except_) for c in (0, 1))
+                       if c in HELD_COMPONENTS.get(role, ()) and (g, c) != except_) for c in (0, 1, 2))
 
 
 RAMP_KEYS = {

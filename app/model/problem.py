@@ -147,7 +147,7 @@ class Problem:
         boundary. The stability tests of other spaces use them: which dofs are fixed, not their values."""
         bc, fdim = self._conditions, self.domain.topology.dim - 1
         bcs = [compat.dirichlet_zero_on_facets(Wu.sub(comp), self.facets_of(groups), fdim)[0]
-               for comp, groups in enumerate(bc.held) if groups]
+               for comp, groups in enumerate(bc.held[:self.domain.geometry.dim]) if groups]
         if driven and bc.driven is not None:
             bcs.append(compat.dirichlet_zero_on_facets(Wu.sub(bc.driven.component), self.tm.facets(bc.driven.group),
                                                        fdim)[0])

@@ -75,17 +75,19 @@ def circumferential_wavenumber(theta: np.ndarray, r: np.ndarray, weights: np.nda
 
 
 def boundary_displacement(problem, array: np.ndarray, groups: list[str]):
-    """(coordinates (N, 2), displacement (N, 2)) at the nodes on facet groups, gathered on every
-    rank, one row per node. ``array`` is a mixed-space array (a state or a mode)."""
+    """(coordinates (N, d), displacement (N, d)) at the nodes on facet groups, gathered on every
+    rank, one row per node (d = 2 or 3, the mesh's dimension). ``array`` is a mixed-space array (a state or
+    a mode)."""
     p = problem
     V, dofs_in_W = p.V_u, p.u_dofs
     fdim = p.domain.topology.dim - 1
+    d = p.domain.geometry.dim
     facets = np.unique(np.concatenate([p.tm.facets(g) for g in groups])) if groups else np.empty(0, np.int32)
     blocks = compat.locate_dofs_on_facets(V, fdim, facets)
     n_owned = V.dofmap.index_map.size_local
     blocks = blocks[blocks < n_owned]
-    coords = V.tabulate_dof_coordinates()[blocks, :2]
-    values = np.stack([array[dofs_in_W[2 * blocks]], array[dofs_in_W[2 * blocks + 1]]], axis=-1)
+    coords = V.tabulate_dof_coordinates()[blocks, :d]
+    values = np.stack([array[dofs_in_W[d * blocks + c]] for c in range(d)], axis=-1)
     data = p.comm.allgather((coords, values))
     return np.concatenate([d[0] for d in data]), np.concatenate([d[1] for d in data])
 
@@ -187,9 +189,106 @@ class OpenSurface(SurfaceShape):
     name = "along"
 
 
+def plane_axes(coords: np.ndarray) -> tuple[int, tuple[int, int]]:
+    """(normal axis, (first, second) in-plane axes) of a flat surface lying across coordinate axes: its
+    normal is the axis along which it is thinnest (the plate's top: y, in-plane x and z)."""
+    extent = np.ptp(coords, axis=0)
+    normal = int(np.argmin(extent))
+    return normal, tuple(a for a in range(coords.shape[1]) if a != normal)
+
+
+def plane_modes(position: np.ndarray, profile: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The profile on a rectangle's tensor grid of nodes (``position``: (N, 2) in-plane coordinates)
+    expanded in cos(m pi a / La) cos(n pi b / Lb), the shapes a rectangle with sides on rollers allows:
+    (energy (M + 1, N + 1), the fraction of the profile's squared norm in each (m, n)), trapezoidal weights,
+    m and n up to the grid's Nyquist number. ``ValueError`` if the nodes are not a tensor grid."""
+    a = np.unique(np.round(position[:, 0], 12))
+    b = np.unique(np.round(position[:, 1], 12))
+    if len(a) * len(b) != len(position):
+        raise ValueError("the plane surface's nodes are not a tensor grid")
+    ia = np.searchsorted(a, np.round(position[:, 0], 12))
+    ib = np.searchsorted(b, np.round(position[:, 1], 12))
+    f = np.zeros((len(a), len(b)))
+    f[ia, ib] = profile
+    wa, wb = _trapezoid(a), _trapezoid(b)
+    ca = np.cos(np.pi * np.outer(np.arange(len(a)), (a - a[0]) / (a[-1] - a[0])))  # (m, node)
+    cb = np.cos(np.pi * np.outer(np.arange(len(b)), (b - b[0]) / (b[-1] - b[0]))) if len(b) > 1 else np.ones((1, 1))
+    wb = wb if len(b) > 1 else np.ones(1)
+    proj = (ca * wa) @ f @ (cb * wb).T  # <f, phi_mn>
+    norm = np.outer((ca ** 2) @ wa, (cb ** 2) @ wb)  # <phi_mn, phi_mn>
+    total = float(np.einsum("i,ij,j->", wa, f ** 2, wb))
+    energy = proj ** 2 / norm / total if total > 0 else np.zeros_like(proj)
+    return energy, np.array([a[-1] - a[0], b[-1] - b[0]])
+
+
+def _trapezoid(x: np.ndarray) -> np.ndarray:
+    if len(x) < 2:
+        return np.ones(1)
+    h = np.diff(x)
+    return np.concatenate([[h[0] / 2], (h[:-1] + h[1:]) / 2, [h[-1] / 2]])
+
+
+def plane_wave_vector(position: np.ndarray, profile: np.ndarray) -> tuple[int, int]:
+    """(m, n): the half-waves along the first and second in-plane axes of the profile's strongest
+    :func:`plane_modes` shape, the uniform (0, 0) excluded."""
+    energy, _ = plane_modes(position, profile)
+    energy[0, 0] = -1.0
+    m, n = np.unravel_index(int(np.argmax(energy)), energy.shape)
+    return int(m), int(n)
+
+
+def plane_count(m: int, n: int, lengths) -> float:
+    """The wrinkle count of half-waves (m, n) on a rectangle of sides ``lengths``: |k| L_a / (2 pi), the
+    wavelengths along the first side at the mode's |k|, which is the 2D N_c (half-waves / 2) for n = 0."""
+    return 0.5 * float(np.hypot(m, n * lengths[0] / lengths[1])) if lengths[1] > 0 else 0.5 * m
+
+
+class PlaneSurface(SurfaceShape):
+    """A flat surface over a rectangle with its sides on rollers (the 3D plate's top): the normal
+    displacement over the two in-plane axes, counted by its strongest cos x cos shape (:func:`plane_modes`)."""
+
+    name = "plane"
+    position_label = "position on the surface [mm]"
+    count_step = 0.0  # a count is |k| L / (2 pi) of half-wave pairs: no fixed step
+
+    @staticmethod
+    def _project(coords: np.ndarray, disp: np.ndarray):
+        normal, (a, b) = plane_axes(coords)
+        position = coords[:, [a, b]] - coords[:, [a, b]].min(axis=0)
+        return position, disp[:, normal]
+
+    def order(self, coords: np.ndarray) -> np.ndarray:
+        _, (a, b) = plane_axes(coords)
+        return np.lexsort((coords[:, b], coords[:, a]))
+
+    def mode_count(self, coords: np.ndarray, disp: np.ndarray) -> float:
+        position, un = self._project(coords, disp)
+        return self.count(position, un, np.ones_like(un))
+
+    def wave_vector(self, coords: np.ndarray, disp: np.ndarray) -> tuple[int, int]:
+        """(m, n) half-waves of a mode's normal displacement along the surface's two in-plane axes."""
+        position, un = self._project(coords, disp)
+        return plane_wave_vector(position, un)
+
+    def detrended(self, coords: np.ndarray, disp: np.ndarray, outward: bool):
+        position, un = self._project(coords, disp)
+        if outward and un.mean() < 0:
+            un = -un
+        basis = np.stack([np.ones_like(un), position[:, 0], position[:, 1]], axis=1)
+        return position, un, np.ones_like(un), basis
+
+    def count(self, position: np.ndarray, profile: np.ndarray, weights: np.ndarray) -> float:
+        m, n = plane_wave_vector(position, profile)
+        return plane_count(m, n, np.ptp(position, axis=0))
+
+    def plotted(self, coords: np.ndarray, disp: np.ndarray):
+        return self._project(coords, disp)
+
+
 SHAPES: Registry[SurfaceShape] = Registry("surface shape")
 SHAPES.register(OpenSurface())
 SHAPES.register(ClosedSurface())
+SHAPES.register(PlaneSurface())
 
 
 def shape_of(problem) -> SurfaceShape:
@@ -271,6 +370,16 @@ def mode_wrinkle_count(problem, mode: np.ndarray) -> float:
     integer wavenumber around a closed one (tube)."""
     coords, disp = boundary_displacement(problem, mode, problem.geo.facets_with_role("permeable"))
     return shape_of(problem).mode_count(coords, disp)
+
+
+def mode_wave_vector(problem, mode: np.ndarray) -> tuple[int, int] | None:
+    """A mode's half-waves (m, n) along the two in-plane axes of a plane surface (the 3D plate's top); None
+    for a surface measured along or around a curve."""
+    shape = shape_of(problem)
+    if not hasattr(shape, "wave_vector"):
+        return None
+    coords, disp = boundary_displacement(problem, mode, problem.geo.facets_with_role("permeable"))
+    return shape.wave_vector(coords, disp)
 
 
 # --- the shape of a state's surface (history columns amplitude_mm and wrinkle_count) ------------------

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from app.model.surface import mode_wrinkle_count, shape_of
+from app.model.surface import mode_wave_vector, mode_wrinkle_count, shape_of
 from app.onset.crossing import Crossing
 
 BAND_MODES = 8  # eigenpairs sampled at the unstable end to locate the minimum of lambda(N)
@@ -67,6 +67,10 @@ class Bisection:
         mode_pair = pairs_hi[min(base_count, len(pairs_hi) - 1)]
         counts = [mode_wrinkle_count(p, e.vector) for e in pairs_hi]
         modes = [{"eigenvalue": e.value, "wrinkle_count": n} for e, n in zip(pairs_hi, counts)][:n_modes]
+        for entry, e in zip(modes, pairs_hi):  # 3D: each mode's wave vector, half-waves along x and z
+            wave = mode_wave_vector(p, e.vector)
+            if wave is not None:
+                entry["wave_vector"] = list(wave)
         first = counts[min(base_count, len(counts) - 1)]
         vertex = band_vertex(counts[base_count:], [e.value for e in pairs_hi[base_count:]],
                              step=shape_of(p).count_step)
@@ -75,7 +79,8 @@ class Bisection:
             wrinkle_count=vertex if vertex is not None else first, first_mode_wrinkle_count=first,
             lambda_min_before=lam_lo, lambda_min_after=lam_hi, bracket=(lo.t, hi.t),
             negative_eigenvalues=base_count + 1, modes=modes, bisection_solves=solves, mode=mode_pair.vector,
-            state=p.state.x.array.copy(), lo=lo, hi=hi, hi_count=hi_count)
+            state=p.state.x.array.copy(), lo=lo, hi=hi, hi_count=hi_count,
+            multiplicity=max(1, hi_count - base_count))
 
 
 def band_vertex(counts, eigenvalues, step: float = 0.5) -> float | None:

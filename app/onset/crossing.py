@@ -30,6 +30,7 @@ class Crossing:
     lo: object = None  # stepper snapshots at the bracket ends (for further crossings)
     hi: object = None
     hi_count: int = 0  # negative eigenvalues at the unstable end
+    multiplicity: int = 1  # eigenvalues that crossed within the final bracket (equal |k| on a square plate)
 
     #: the arrays a crossing holds only while it is being located: never in a checkpoint
     TRANSIENT = ("mode", "state", "lo", "hi")
@@ -48,6 +49,7 @@ class Crossing:
                 "wrinkle_count": self.wrinkle_count, "first_mode_wrinkle_count": self.first_mode_wrinkle_count,
                 "lambda_min_before": self.lambda_min_before,
                 "lambda_min_after": self.lambda_min_after, "bracket": list(self.bracket),
-                "negative_eigenvalues": self.negative_eigenvalues, "modes": self.modes,
+                "negative_eigenvalues": self.negative_eigenvalues, "multiplicity": self.multiplicity,
+                "modes": self.modes,
                 "bisection_solves": self.bisection_solves,
                 "discretization_error": None}  # filled by stability.error_estimate / hydrobuckle converge

@@ -92,9 +92,13 @@ class OnsetTracker:
         self.surface_onset: dict | None = None
         if settings.surface_check and problem.diffusion and problem.loading.surface_term \
                 and problem.geo.facets_with_role("permeable"):
-            from app.onset.surface import SurfaceCheck
+            if problem.domain.geometry.dim == 2:
+                from app.onset.surface import SurfaceCheck
 
-            self.surface = SurfaceCheck(problem, settings.rule)
+                self.surface = SurfaceCheck(problem, settings.rule)
+            else:  # the half-space of a facet in 3D is not built (docs/three-d.md): the 1D companion's
+                log("  the short-wave surface check is two-dimensional only: in 3D the surface onset comes from "
+                    "the 1D reduction where the geometry has one")
         if settings.policy.branches:
             from app.onset.branching import BranchSwitcher, typical_cell_size
 
@@ -156,7 +160,8 @@ class OnsetTracker:
             crossing = self.bisection.locate(lo, unstable, base_count=self.count)
             self.crossings.append(crossing)
             self.log(f"  crossing #{len(self.crossings)}: t = {crossing.time:.6f} s, "
-                     f"growth = {1e3 * crossing.growth_mm:.4f} um, N = {crossing.wrinkle_count:g}")
+                     f"growth = {1e3 * crossing.growth_mm:.4f} um, N = {crossing.wrinkle_count:g}"
+                     + _waves(crossing))
             if len(self.crossings) == 1:
                 self.limits = self._other_limits()
                 self.on_first_crossing(crossing)
@@ -336,3 +341,12 @@ class Untracked:
 
     def restore_checkpoint(self, state, snapshots) -> None:
         pass
+
+
+def _waves(crossing) -> str:
+    """A 3D crossing's critical wave vectors for its log line ('' in 2D)."""
+    waves = [tuple(m["wave_vector"]) for m in crossing.modes[:crossing.multiplicity] if "wave_vector" in m]
+    if not waves:
+        return ""
+    return (f", half-waves (m along x, n along z) {', '.join(map(str, waves))}"
+            + (f", {crossing.multiplicity} modes crossing together" if crossing.multiplicity > 1 else ""))
