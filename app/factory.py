@@ -65,9 +65,9 @@ def section(cfg: dict) -> Section:
     materials = layer_materials(cfg)
     loading = Loading.from_config(cfg, mu_start=materials["film"].mu0, drive=drive(cfg))
     H, w = geo["substrate_thickness"], geo["film_thickness"]
-    if geo["kind"] == "bilayer":
+    if geo["kind"] in ("bilayer", "plate"):
         layers = (Layer("substrate", 0.0, H), Layer("film", H, H + w))
-        return Section("planar", layers, H + w, 0.0, geo["length"], materials, loading)
+        return Section("planar", layers, H + w, 0.0, geo["length"], materials, loading, width=geo.get("width"))
     R = geo["outer_radius"]
     a = R - H - w
     layers = (Layer("film", a, a + w), Layer("substrate", a + w, R))

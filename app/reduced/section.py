@@ -2,7 +2,10 @@
 where fluid enters, what is held, and the 1D mesh.
 
 Planar (``geometry.kind = "bilayer"``): Y from the substrate's base (Y = 0, roller: u_y = 0, no flux) to
-the film's permeable surface (Y = H + w). Axisymmetric (``"tube"``): r from the passage (r = R - H - w,
+the film's permeable surface (Y = H + w). The 3D plate (``"plate"``) has the same section: its laterally
+uniform state is the bilayer's, and a mode cos(m pi x / L) cos(n pi z / W) of its rollered rectangle reduces
+to the planar one at |k| = pi sqrt((m/L)^2 + (n/W)^2) (the in-plane polarized part; the antiplane part is a
+shear that stays stable), so its modes are the lattice of those |k|, numbered in increasing order. Axisymmetric (``"tube"``): r from the passage (r = R - H - w,
 the film's permeable surface) to the rigid impermeable wall (r = R: u = 0, no flux).
 """
 
@@ -16,9 +19,11 @@ import numpy as np
 from app.model.loading import Loading
 from app.model.material import Material
 
-KINDS = ("bilayer", "tube")
+KINDS = ("bilayer", "tube", "plate")
 CRITERIA = ("drained", "undrained", "rate")  # the stability criteria with a 1D counterpart (modes.py)
-LOADINGS = {"bilayer": ("swelling", "compression"), "tube": ("swelling",)}
+# the plate's compression is uniaxial: its state is not the same in x and z, so only stripes along x reduce
+LOADINGS = {"bilayer": ("swelling", "compression"), "tube": ("swelling",), "plate": ("swelling",)}
+LATTICE_WAVENUMBER = 40.0  # the plate's lattice of |k| is listed up to k w = this (above the tested maximum)
 
 
 class NotReducible(ValueError):
@@ -46,6 +51,7 @@ class Section:
     materials: dict[str, Material]
     loading: Loading
     film: str = "film"
+    width: float | None = None  # the 3D plate's width W along z (its modes: the lattice of |k|, see lattice())
 
     @property
     def film_layer(self) -> Layer:
@@ -56,12 +62,46 @@ class Section:
         return self.film_layer.thickness
 
     def wavenumber(self, n: float) -> float:
-        """k of mode n: n pi / L along the bilayer (N = n/2 wrinkles); n around the tube."""
+        """k of mode n: n pi / L along the bilayer (N = n/2 wrinkles); n around the tube; the plate's n-th
+        distinct |k| of its lattice (n = 1, 2, ...)."""
+        if self.width is not None:
+            return float(self.lattice()[0][int(n) - 1])
         return n * math.pi / self.length if self.shape == "planar" else float(n)
 
     def wrinkle_count(self, n: int) -> float:
-        """What the 2D runs report as N_c for mode n: half-waves / 2 along the bilayer, n around the tube."""
+        """What the 2D runs report as N_c for mode n: half-waves / 2 along the bilayer, n around the tube,
+        |k| L / (2 pi) on the plate (the bilayer's count for a stripe along x)."""
+        if self.width is not None:
+            return self.wavenumber(n) * self.length / (2 * math.pi)
         return n / 2 if self.shape == "planar" else float(n)
+
+    def lattice(self) -> tuple[np.ndarray, list[list[tuple[int, int]]]]:
+        """The plate's modes: the distinct |k| = pi sqrt((m/L)^2 + (n/W)^2) > 0 up to k w =
+        LATTICE_WAVENUMBER in increasing order, and the half-wave pairs (m, n) of each (several where the
+        sides allow equal |k|: (m, n) and (n, m) on a square)."""
+        cached = _LATTICES.get((self.length, self.width, self.film_thickness))
+        if cached is None:
+            L, W = self.length, self.width
+            k_max = LATTICE_WAVENUMBER / self.film_thickness
+            m = np.arange(int(k_max * L / math.pi) + 1)
+            n = np.arange(int(k_max * W / math.pi) + 1)
+            mm, nn = np.meshgrid(m, n, indexing="ij")
+            k2 = (mm / L) ** 2 + (nn / W) ** 2
+            keep = (k2 > 0) & (k2 <= (k_max / math.pi) ** 2)
+            mm, nn, k2 = mm[keep], nn[keep], k2[keep]
+            order = np.lexsort((nn, mm, k2))
+            mm, nn, k2 = mm[order], nn[order], k2[order]
+            new = np.concatenate([[True], np.diff(k2) > 1e-12 * k2[1:]])  # equal |k| to roundoff: one mode
+            starts = np.flatnonzero(new)
+            ks = math.pi * np.sqrt(k2[starts])
+            pairs = [list(zip(mm[a:b].tolist(), nn[a:b].tolist()))
+                     for a, b in zip(starts, [*starts[1:], len(k2)])]
+            cached = _LATTICES[(self.length, self.width, self.film_thickness)] = (ks, pairs)
+        return cached
+
+    def wave_vectors(self, n: int) -> list[tuple[int, int]] | None:
+        """The plate's half-wave pairs (m, n) of mode n; None for the bilayer and the tube."""
+        return self.lattice()[1][int(n) - 1] if self.width is not None else None
 
     def local_wavenumber(self, n: float) -> float:
         """The wavenumber along the permeable surface [1/mm] (around the tube: n / passage radius)."""
@@ -87,6 +127,9 @@ class Section:
         return np.unique(np.round(np.concatenate(pts), 15))
 
 
+_LATTICES: dict = {}  # (L, W, w) -> Section.lattice()
+
+
 def _graded(length: float, first: float, ratio: float, from_start: bool) -> np.ndarray:
     """Vertices of [0, length] whose cells grow by ``ratio`` from ``first`` (at 0, or at ``length``),
     the sizes scaled so the last cell ends exactly at the far end."""
@@ -105,7 +148,7 @@ def drive(cfg: dict):
     from app.geometry.base import Drive
 
     geo = cfg["geometry"]
-    return Drive("right", 0, geo["length"]) if geo["kind"] == "bilayer" else None
+    return Drive("right", 0, geo["length"]) if geo["kind"] in ("bilayer", "plate") else None
 
 
 def reducible(cfg: dict) -> str:

@@ -7,6 +7,8 @@ import math
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from app.reduced.onset import Crossing, MarginCurve, Screen, Stability, margin_curve, mode_grid
 from app.reduced.section import Section
 from app.reduced.transient import LayeredModel, Resolution, Snapshot, Transient, schedule
@@ -52,6 +54,8 @@ def earliest(curve: MarginCurve) -> Crossing | None:
 def n_max(section: Section, max_wavenumber: float) -> int:
     """The largest mode number tested: k w = max_wavenumber along the surface."""
     k = max_wavenumber / section.film_thickness
+    if section.width is not None:  # the plate: the lattice's distinct |k| up to k
+        return max(2, int(np.searchsorted(section.lattice()[0], k, side="right")))
     if section.shape == "planar":
         return max(2, int(math.ceil(k * section.length / math.pi)))
     return max(2, int(math.ceil(k * section.surface)))

@@ -33,14 +33,18 @@ def _um(x):
     return None if x is None else 1e3 * x
 
 
-def _crossing(c) -> dict | None:
+def _crossing(c, section=None) -> dict | None:
     if c is None:
         return None
-    return {"mode_number": c.n, "wrinkle_count": c.wrinkles, "wavelength_mm": c.wavelength, "time": c.time,
-            "growth_um": _um(c.growth)}
+    out = {"mode_number": c.n, "wrinkle_count": c.wrinkles, "wavelength_mm": c.wavelength, "time": c.time,
+           "growth_um": _um(c.growth)}
+    waves = section.wave_vectors(c.n) if section is not None and c.n is not None else None
+    if waves is not None:  # the plate: the half-wave pairs (m, n) of the critical |k|
+        out["wave_vectors"] = [list(w) for w in waves]
+    return out
 
 
-def summarize(est: Estimate, st: Settings, seconds: float) -> dict:
+def summarize(est: Estimate, st: Settings, seconds: float, section=None) -> dict:
     """The JSON block of a reduced answer (summary.json of ``reduced``; ``reduced`` in a 2D summary)."""
     base = est.levels[0].curve if est.levels else None
     v = est.value
@@ -62,16 +66,19 @@ def summarize(est: Estimate, st: Settings, seconds: float) -> dict:
         "wrinkle_count": v.wrinkles if v else None,
         "wavelength_mm": v.wavelength if v else None,
         "error_parts_um": {k: (_um(x) if isinstance(x, float) else x) for k, x in est.parts.items()},
-        "first_finite_wavelength": _crossing(base.finite_minimum()) if base else None,
+        "first_finite_wavelength": _crossing(base.finite_minimum(), section) if base else None,
         "short_wave_limit": _crossing(base.short_wave) if base else None,
         "tested_mode_numbers": [1, base.n_max] if base else None,
         "end_time": base.end_time if base else None,
         "levels": [{"name": lev.name, "cells": lev.cells, "degree": lev.resolution.degree, "steps": len(lev.steps) - 1,
-                    "onset": _crossing(lev.onset()), "seconds": round(lev.seconds, 3)} for lev in est.levels],
+                    "onset": _crossing(lev.onset(), section), "seconds": round(lev.seconds, 3)} for lev in est.levels],
         "seconds": round(seconds, 3),
     }
     if kind == "surface":
         out["where"] = "permeable surface"
+    waves = section.wave_vectors(v.n) if section is not None and kind == "wrinkles" else None
+    if waves is not None:  # the plate: every (m, n) at the critical |k| crosses together
+        out["wave_vectors"] = [list(w) for w in waves]
     return out
 
 
@@ -85,9 +92,9 @@ def compute(cfg: dict, stop=None) -> dict:
 
     st = settings(cfg)
     t0 = time.perf_counter()
-    est = converged(factory.section(cfg), st, stop=stop)
-    block = summarize(est, st, time.perf_counter() - t0)
     section = factory.section(cfg)
+    est = converged(section, st, stop=stop)
+    block = summarize(est, st, time.perf_counter() - t0, section)
     block["mu_bar"] = section.loading.mu_bar(block["time"]) if block["time"] is not None else None
     curve = est.levels[0].curve
     early = sorted(curve.modes.values(), key=lambda c: c.time)[:ISOMODES]
@@ -108,8 +115,10 @@ def describe(block: dict) -> str:
                 if ff else "")
         return (f"1D reduction ({block['criterion']}): the permeable surface is unstable at short waves (no "
                 f"wavelength of its own) from g = {block['growth_um']:.4f} um{bar} at t = {block['time']:.5f} s{tail}")
+    waves = block.get("wave_vectors")
+    waves = f", half-waves (m, n) {', '.join(str(tuple(w)) for w in waves)}" if waves else ""
     return (f"1D reduction ({block['criterion']}): g_c = {block['growth_um']:.4f} um{bar}, N_c = "
-            f"{block['wrinkle_count']:g} at t_c = {block['time']:.5f} s")
+            f"{block['wrinkle_count']:g}{waves} at t_c = {block['time']:.5f} s")
 
 
 def add_reduced(summary: dict, cfg: dict, comm) -> None:
