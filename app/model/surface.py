@@ -240,7 +240,10 @@ def plane_wave_vector(position: np.ndarray, profile: np.ndarray) -> tuple[int, i
 def plane_count(m: int, n: int, lengths) -> float:
     """The wrinkle count of half-waves (m, n) on a rectangle of sides ``lengths``: |k| L_a / (2 pi), the
     wavelengths along the first side at the mode's |k|, which is the 2D N_c (half-waves / 2) for n = 0."""
-    return 0.5 * float(np.hypot(m, n * lengths[0] / lengths[1])) if lengths[1] > 0 else 0.5 * m
+    if lengths[1] <= 0:
+        return 0.5 * m
+    ratio = round(float(lengths[0] / lengths[1]), 9)  # the sides' ratio, free of the node coordinates' roundoff
+    return 0.5 * float(np.hypot(m, n * ratio))
 
 
 class PlaneSurface(SurfaceShape):
