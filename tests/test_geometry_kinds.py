@@ -11,7 +11,7 @@ from app.schema import ConfigError, gt, key
 
 
 def test_every_registered_kind_is_in_the_schema_with_its_defaults():
-    assert config.GEOMETRY_KINDS == geometry.KINDS.names() == ("bilayer", "tube", "elliptic-tube", "msh")
+    assert config.GEOMETRY_KINDS == geometry.KINDS.names() == ("bilayer", "tube", "elliptic-tube", "plate", "msh")
     table = config.SCHEMA["geometry"]
     assert table["kind"].default == geometry.DEFAULT_KIND
     for kind in geometry.KINDS:
@@ -39,25 +39,25 @@ def _toy_model(width, depth, element_size, film_layers):
 
 class ToySlab(GeometryKind):
     name = "toy-slab"
-    keys = {"width": key(float, 0.1, gt(0), "slab width [mm]", unit="mm"),
+    keys = {"span": key(float, 0.1, gt(0), "slab span [mm]", unit="mm"),
             "depth": key(float, 0.05, gt(0), "substrate depth [mm]", unit="mm")}
     mesh_defaults = {"element_size": 0.025, "film_layers": 1}
     film_element_fraction = None
     provides = frozenset()
 
     def validate(self, cfg):
-        if cfg["mesh"]["element_size"] > cfg["geometry"]["width"] / 2:
+        if cfg["mesh"]["element_size"] > cfg["geometry"]["span"] / 2:
             raise ConfigError("mesh.element_size", "is too coarse for the toy slab")
 
     def build(self, cfg, comm, msh_path=None):
         from app.geometry.tagged import mesh_from_builder
 
         g, m = cfg["geometry"], cfg["mesh"]
-        tm = mesh_from_builder(comm, "toy", _toy_model, g["width"], g["depth"], m["element_size"], m["film_layers"],
+        tm = mesh_from_builder(comm, "toy", _toy_model, g["span"], g["depth"], m["element_size"], m["film_layers"],
                                msh_path=msh_path)
         return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},
                              {"left": "fixed", "right": "free", "bottom": "roller_y", "top": "permeable"},
-                             drive=Drive("right", 0, g["width"]))
+                             drive=Drive("right", 0, g["span"]))
 
 
 @pytest.fixture
@@ -72,28 +72,28 @@ def toy():
 def test_a_registered_kind_is_accepted_by_config(toy):
     assert "toy-slab" in config.GEOMETRY_KINDS
     cfg = config.resolve({"geometry": {"kind": "toy-slab"}})
-    assert cfg["geometry"]["width"] == 0.1 and cfg["mesh"]["element_size"] == 0.025
+    assert cfg["geometry"]["span"] == 0.1 and cfg["mesh"]["element_size"] == 0.025
     assert cfg["geometry"]["length"] is None
     with pytest.raises(ConfigError, match="'geometry.length': is not used by geometry.kind = 'toy-slab'; its keys "
-                                          "are: depth, width"):
+                                          "are: depth, span"):
         config.resolve({"geometry": {"kind": "toy-slab", "length": 1.0}})
-    with pytest.raises(ConfigError, match="'geometry.width': = -1.0 is out of range; allowed: > 0"):
-        config.resolve({"geometry": {"kind": "toy-slab", "width": -1.0}})
+    with pytest.raises(ConfigError, match="'geometry.span': = -1.0 is out of range; allowed: > 0"):
+        config.resolve({"geometry": {"kind": "toy-slab", "span": -1.0}})
     with pytest.raises(ConfigError, match="too coarse for the toy slab"):
-        config.resolve({"geometry": {"kind": "toy-slab", "width": 0.04}})
+        config.resolve({"geometry": {"kind": "toy-slab", "span": 0.04}})
     # it provides no drive: compression is refused with the kinds that have one
     with pytest.raises(ConfigError, match="'compression' needs geometry.kind = 'bilayer'; allowed for 'toy-slab': "
                                           "'swelling'"):
         config.resolve({"geometry": {"kind": "toy-slab"}, "loading": {"kind": "compression"}})
     # the other kinds' keys are still theirs
     with pytest.raises(ConfigError, match="not used by geometry.kind = 'bilayer'"):
-        config.resolve({"geometry": {"width": 0.2}})
+        config.resolve({"geometry": {"span": 0.2}})
 
 
 def test_unregistered_kind_leaves_the_schema(toy):
     geometry.KINDS.unregister(toy.name)
     try:
-        assert "width" not in config.SCHEMA["geometry"]
+        assert "span" not in config.SCHEMA["geometry"]
         with pytest.raises(ConfigError, match="geometry.kind"):
             config.resolve({"geometry": {"kind": "toy-slab"}})
     finally:
@@ -107,7 +107,7 @@ def test_a_registered_kind_is_written_by_the_mesh_command_and_builds_a_problem(t
     comm = MPI.COMM_WORLD
     cfg_path, out = shared_tmp / "toy.toml", shared_tmp / "toy.msh"
     if comm.rank == 0:
-        cfg_path.write_text('[geometry]\nkind = "toy-slab"\nwidth = 0.1\n')
+        cfg_path.write_text('[geometry]\nkind = "toy-slab"\nspan = 0.1\n')
     comm.barrier()
     assert cli.main(["mesh", str(cfg_path), "-o", str(out)]) == 0
     printed = capsys.readouterr().out

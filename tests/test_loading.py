@@ -45,9 +45,12 @@ def test_swelling_ramp_kinks_and_conditions_by_role():
     assert lo.applied_strain(5.0) == 0.0 and lo.applied_displacement(5.0) == 0.0
     assert lo.surface_term and lo.kind == "swelling"
     bc = lo.conditions(BILAYER_ROLES)
-    assert bc.held == (("left", "right"), ("bottom",)) and bc.driven is None and bc.flux_open == ("top",)
+    assert bc.held == (("left", "right"), ("bottom",), ()) and bc.driven is None and bc.flux_open == ("top",)
     tube = lo.conditions({"inner": "permeable", "outer": "fixed", "side": "free"})
-    assert tube.held == (("outer",), ("outer",)) and tube.flux_open == ("inner",)
+    assert tube.held == (("outer",), ("outer",), ("outer",)) and tube.flux_open == ("inner",)  # z unused in 2D
+    plate = lo.conditions({"left": "roller_x", "right": "roller_x", "front": "roller_z", "back": "roller_z",
+                           "bottom": "roller_y", "top": "permeable"})
+    assert plate.held == (("left", "right"), ("bottom",), ("front", "back")) and plate.flux_open == ("top",)
 
 
 def test_compression_moves_the_driven_edge_with_diffusion_off():
@@ -62,7 +65,7 @@ def test_compression_moves_the_driven_edge_with_diffusion_off():
     assert lo.kinks() == [] and not lo.surface_term
     assert lo.mu_bar(0.5) == -40.0  # the ramp is recorded in the history, it does not act
     bc = lo.conditions(BILAYER_ROLES)
-    assert bc.held == (("left",), ("bottom",)) and bc.driven == drive and bc.flux_open is None
+    assert bc.held == (("left",), ("bottom",), ()) and bc.driven == drive and bc.flux_open is None
 
 
 def test_loading_keys_and_kinds_come_from_the_registry():
