@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import on_rank0, read_csv, same_rows, same_summary
+from conftest import REPO, on_rank0, read_csv, same_rows, same_summary
 from mpi4py import MPI
 
 from app import config
@@ -133,3 +133,19 @@ def test_the_plate_lattice_lists_equal_wavenumbers_together():
     i = int(np.argmin(abs(ks - 5 * math.pi / 0.25)))
     assert sorted(pairs[i]) == [(0, 5), (3, 4), (4, 3), (5, 0)]
     assert sec.wavenumber(i + 1) == ks[i] and sec.wrinkle_count(i + 1) == pytest.approx(2.5)
+
+
+@pytest.mark.parametrize("setting, value", [("contact", True), ("creases", True), ("after_onset", "branch")])
+def test_the_2d_only_options_are_refused_for_a_plate_with_one_line(shared_tmp, capsys, setting, value):
+    """Self-contact, the trial crease and the branch's end checks read the surface as a curve: a plate config
+    asking for them gets one line naming the key and what is allowed, exit 2, and no result directory."""
+    from app import cli
+
+    out = shared_tmp / f"refused-{setting}"
+    text = f"{value}".lower() if isinstance(value, bool) else f'"{value}"'
+    code = cli.main(["run", str(REPO / "configs" / "plate.toml"), "--set", f"stability.{setting}={text}", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and not out.exists()
+    if MPI.COMM_WORLD.rank == 0:
+        line = [ln for ln in err.splitlines() if ln.startswith("hydrobuckle: error:")]
+        assert len(line) == 1 and f"'stability.{setting}'" in line[0] and "2D only; allowed for" in line[0]

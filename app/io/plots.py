@@ -98,10 +98,11 @@ def mode_map_plot(profile, crossing, path) -> None:
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("z [mm]")
-    waves = ", ".join(f"{m['wave_vector']}" for m in crossing.modes[:crossing.multiplicity] if "wave_vector" in m)
+    waves = ", ".join(str(tuple(m["wave_vector"])) for m in crossing.modes[:crossing.multiplicity]
+                      if "wave_vector" in m)
     ax.set_title(f"g_c = {1e3 * crossing.growth_mm:.3f} um, t_c = {crossing.time:.4f} s, N_c = "
                  f"{crossing.wrinkle_count:.4g}\ncritical half-waves (m, n): {waves or '?'}"
-                 f" (multiplicity {crossing.multiplicity}); first mode shown", fontsize=9)
+                 f"\n{crossing.multiplicity} crossing together; the first shown", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)

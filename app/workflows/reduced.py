@@ -162,9 +162,10 @@ def compare(summary: dict) -> str:
         return ""
     err = (c.get("discretization_error") or {}).get("total_um")
     d = g2 - g1
-    text = f"; 2D - 1D = {d:+.4f} um ({100 * d / g1:+.2f}%"
+    dim = "3D" if red.get("wave_vectors") else "2D"  # a plate's block lists its lattice point's (m, n)
+    text = f"; {dim} - 1D = {d:+.4f} um ({100 * d / g1:+.2f}%"
     if err:
-        text += f", {abs(d) / err:.2f} of the 2D error bar"
+        text += f", {abs(d) / err:.2f} of the {dim} error bar"
     text += ")"
     if err and abs(d) > err + (red.get("growth_error_um") or 0.0):
         text += ("; the exact 1D value lies outside the 2D error bar: the 2D mesh misses something its "
