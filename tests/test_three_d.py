@@ -149,3 +149,18 @@ def test_the_2d_only_options_are_refused_for_a_plate_with_one_line(shared_tmp, c
     if MPI.COMM_WORLD.rank == 0:
         line = [ln for ln in err.splitlines() if ln.startswith("hydrobuckle: error:")]
         assert len(line) == 1 and f"'stability.{setting}'" in line[0] and "2D only; allowed for" in line[0]
+
+
+def test_a_rectangular_plate_lattice_weighs_each_side_by_its_length():
+    """L = 0.3, W = 0.2: |k| = pi sqrt((m / L)^2 + (n / W)^2) in increasing order, (1, 0), (0, 1), (1, 1),
+    (2, 0), each alone, and the count is |k| L / (2 pi)."""
+    from app import factory
+
+    L, W = 0.3, 0.2
+    sec = factory.section(config.resolve({"geometry": {"kind": "plate", "length": L, "width": W}}, []))
+    ks, pairs = sec.lattice()
+    expected = [(1, 0), (0, 1), (1, 1), (2, 0)]
+    assert [sorted(map(tuple, p)) for p in pairs[:4]] == [[w] for w in expected]
+    for i, (m, n) in enumerate(expected):
+        assert ks[i] == pytest.approx(math.pi * math.hypot(m / L, n / W), rel=1e-12)
+        assert sec.wrinkle_count(i + 1) == pytest.approx(plane_count(m, n, (L, W)), rel=1e-12)
