@@ -787,7 +787,8 @@ def test_a_switch_that_lowers_the_count_does_not_make_the_same_instability_a_new
 
     def locate(lo, hi, base_count):
         located.append(base_count)
-        return SimpleNamespace(hi=hi, lo=lo, hi_count=base_count + 1, time=hi.t, growth_mm=0.01, wrinkle_count=9)
+        return SimpleNamespace(hi=hi, lo=lo, hi_count=base_count + 1, time=hi.t, growth_mm=0.01, wrinkle_count=9,
+                               modes=[], multiplicity=1)  # a Crossing's defaults
 
     tracker = object.__new__(OnsetTracker)
     tracker.settings = StabilitySettings(policy=CrossingPolicy.from_flags(False, 100, "branch"))

@@ -69,5 +69,4 @@ class Plate(GeometryKind):
         return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},
                              {"left": "roller_x", "right": "roller_x", "front": "roller_z", "back": "roller_z",
                               "bottom": "roller_y", "top": "permeable"},
-                             wrinkles="plane", plot_band=6 * geo["film_thickness"],
-                             )
+                             wrinkles="plane", plot_band=6 * geo["film_thickness"])

@@ -345,8 +345,7 @@ class Untracked:
 
 def _waves(crossing) -> str:
     """A 3D crossing's critical wave vectors for its log line ('' in 2D)."""
-    modes = getattr(crossing, "modes", None) or []
-    waves = [tuple(m["wave_vector"]) for m in modes[:getattr(crossing, "multiplicity", 1)] if "wave_vector" in m]
+    waves = [tuple(m["wave_vector"]) for m in crossing.modes[:crossing.multiplicity] if "wave_vector" in m]
     if not waves:
         return ""
     return (f", half-waves (m along x, n along z) {', '.join(map(str, waves))}"

@@ -168,7 +168,7 @@ def compare(summary: dict) -> str:
         text += f", {abs(d) / err:.2f} of the {dim} error bar"
     text += ")"
     if err and abs(d) > err + (red.get("growth_error_um") or 0.0):
-        text += ("; the exact 1D value lies outside the 2D error bar: the 2D mesh misses something its "
+        text += (f"; the exact 1D value lies outside the {dim} error bar: the {dim} mesh misses something its "
                  "companion runs do not show (a thick film's surface diffusion layer: try mesh.film_grading "
                  "or more mesh.film_layers; docs/reduction.md section 5)")
     if red["kind"] == "surface" and c.get("wrinkle_count") is not None:
