@@ -71,4 +71,4 @@ def section(cfg: dict) -> Section:
     R = geo["outer_radius"]
     a = R - H - w
     layers = (Layer("film", a, a + w), Layer("substrate", a + w, R))
-    return Section("axisymmetric", layers, a, R, None, materials, loading)
+    return Section("axisymmetric", layers, a, R, None, materials, loading, axial=geo["kind"] == "tube-3d")

@@ -124,11 +124,11 @@ def check_geometry(outer_radius: float, substrate_thickness: float, film_thickne
     return {"passage_radius": r, "semi_major": a, "semi_minor": b, "min_substrate_thickness": t_min}
 
 
-def add_model(outer_radius: float, substrate_thickness: float, film_thickness: float, element_size: float,
-              film_layers: int, grading: float, aspect_ratio: float = 1.0,
-              film_grading: float = 1.0) -> tuple[dict, dict, dict]:
-    """Mesh the tube in the current gmsh model: (cell groups, facet groups, info); GeometryError for an
-    impossible tube."""
+def add_section(outer_radius: float, substrate_thickness: float, film_thickness: float, element_size: float,
+                film_layers: int, grading: float, aspect_ratio: float = 1.0, film_grading: float = 1.0):
+    """The tube's cross-section in the current gmsh model, transfinite and recombined but not meshed:
+    (film surfaces, substrate surfaces, passage curves, wall curves, info); GeometryError for an impossible
+    tube. :func:`add_model` meshes it in 2D; :mod:`meshes.tube3d` extrudes it along the axis."""
     R, H, w = outer_radius, substrate_thickness, film_thickness
     info = check_geometry(R, H, w, aspect_ratio)
     a, b = info["semi_major"], info["semi_minor"]
@@ -169,16 +169,27 @@ def add_model(outer_radius: float, substrate_thickness: float, film_thickness: f
         loop_s = geo.addCurveLoop([cm, ls1, -co, -ls0])
         film_s.append(geo.addPlaneSurface([loop_f]))
         sub_s.append(geo.addPlaneSurface([loop_s]))
-    geo.synchronize()
     # Connectors run outwards (passage -> interface -> wall): film layers thicken towards
-    # the interface by film_grading, substrate layers towards the wall by grading.
+    # the interface by film_grading, substrate layers towards the wall by grading. Set on the geo kernel (not
+    # the model) so that they survive a later synchronize, e.g. after meshes.tube3d's extrusion.
     for lf in radial_film:
-        gmsh.model.mesh.setTransfiniteCurve(lf, film_layers + 1, "Progression", film_grading)
+        geo.mesh.setTransfiniteCurve(lf, film_layers + 1, "Progression", film_grading)
     for ls in radial_sub:
-        gmsh.model.mesh.setTransfiniteCurve(ls, len(sub_h) + 1, "Progression", grading)
+        geo.mesh.setTransfiniteCurve(ls, len(sub_h) + 1, "Progression", grading)
     for s in film_s + sub_s:
-        gmsh.model.mesh.setTransfiniteSurface(s)
-        gmsh.model.mesh.setRecombine(2, s)
+        geo.mesh.setTransfiniteSurface(s)
+        geo.mesh.setRecombine(2, s)
+    geo.synchronize()
+    return film_s, sub_s, inner, outer, info
+
+
+def add_model(outer_radius: float, substrate_thickness: float, film_thickness: float, element_size: float,
+              film_layers: int, grading: float, aspect_ratio: float = 1.0,
+              film_grading: float = 1.0) -> tuple[dict, dict, dict]:
+    """Mesh the tube in the current gmsh model: (cell groups, facet groups, info); GeometryError for an
+    impossible tube."""
+    film_s, sub_s, inner, outer, info = add_section(outer_radius, substrate_thickness, film_thickness, element_size,
+                                                    film_layers, grading, aspect_ratio, film_grading)
     add_physical(2, film_s, CELLS["film"], "film")
     add_physical(2, sub_s, CELLS["substrate"], "substrate")
     add_physical(1, inner, FACETS["inner"], "inner")

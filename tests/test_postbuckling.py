@@ -793,6 +793,7 @@ def test_a_switch_that_lowers_the_count_does_not_make_the_same_instability_a_new
     tracker = object.__new__(OnsetTracker)
     tracker.settings = StabilitySettings(policy=CrossingPolicy.from_flags(False, 100, "branch"))
     tracker.stepper, tracker.screen, tracker.log, tracker.surface = stepper, screen, lambda msg: None, None
+    tracker.problem = None  # read only for a 3D crossing's wave vectors (none here)
     tracker.bisection = SimpleNamespace(locate=locate)
     tracker.branch = SimpleNamespace(switch=lambda crossing: switched.append(crossing.time))
     tracker.crossings, tracker.restabilized, tracker.count, tracker._bracket = ["the onset"], [], 0, None

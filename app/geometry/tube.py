@@ -43,18 +43,23 @@ class Tube(GeometryKind):
         except GeometryError as err:
             raise ConfigError(err.key, str(err)) from None
 
-    def estimate(self, cfg: dict) -> dict:
-        from app.geometry.base import structured_size
+    def section_size(self, cfg: dict) -> tuple[int, int]:
+        """(elements around the passage, element layers through film and substrate), as meshes.tube meshes."""
         from meshes.bilayer import film_interface_height, substrate_layer_count
         from meshes.tube import ellipse_perimeter, semi_axes
 
         geo, mesh = cfg["geometry"], cfg["mesh"]
         R, H, w = geo["outer_radius"], geo["substrate_thickness"], geo["film_thickness"]
         a, b = semi_axes(R - H - w, self.aspect_ratio(geo))
-        m = max(2, round(ellipse_perimeter(a, b) / mesh["element_size"] / 4))  # as meshes.tube.add_model
+        m = max(2, round(ellipse_perimeter(a, b) / mesh["element_size"] / 4))  # as meshes.tube.add_section
         first = film_interface_height(w, mesh["film_layers"], mesh["film_grading"])
         ny = mesh["film_layers"] + substrate_layer_count(H, first * mesh["substrate_grading"], mesh["substrate_grading"])
-        return structured_size(4 * m, ny, closed=True, what="around the passage")
+        return 4 * m, ny
+
+    def estimate(self, cfg: dict) -> dict:
+        from app.geometry.base import structured_size
+
+        return structured_size(*self.section_size(cfg), closed=True, what="around the passage")
 
     def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
         from meshes.tube import GeometryError

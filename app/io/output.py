@@ -292,7 +292,7 @@ class ResultWriter:
             try:
                 if three_d:  # the surface from above: its normal mode displacement as a colour map
                     writes.on_rank0(self.comm, png, writes.replace_file, png,
-                                    lambda tmp: mode_map_plot(profile, crossing, tmp))
+                                    lambda tmp: mode_map_plot(profile, crossing, tmp, shape.map_axes, shape.wave_label))
                 else:
                     writes.on_rank0(self.comm, png, writes.replace_file, png,
                                     lambda tmp: mode_plot(polys, profile, problem.geo, crossing, tmp))

@@ -88,20 +88,21 @@ def mode_plot(polys, profile, geo, crossing, path) -> None:
     plt.close(fig)
 
 
-def mode_map_plot(profile, crossing, path) -> None:
+def mode_map_plot(profile, crossing, path, axes=("x [mm]", "z [mm]"), wave_label="half-waves (m, n)") -> None:
     """A 3D run's mode seen from above: the permeable surface's normal mode displacement over its two in-plane
-    coordinates (``profile``: (positions (N, 2), normalized values, labels)) as a colour map."""
+    coordinates (``profile``: (positions (N, 2), normalized values, labels); ``axes``: their labels; a tube's
+    passage is shown unrolled) as a colour map."""
     position, value, _, _ = profile
     fig, ax = plt.subplots(figsize=(6.4, 5.6))
     tpc = ax.tricontourf(position[:, 0], position[:, 1], value, levels=21, cmap="RdBu_r", vmin=-1.0, vmax=1.0)
     fig.colorbar(tpc, ax=ax, label="normal mode displacement (max 1)")
     ax.set_aspect("equal")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("z [mm]")
+    ax.set_xlabel(axes[0])
+    ax.set_ylabel(axes[1])
     waves = ", ".join(str(tuple(m["wave_vector"])) for m in crossing.modes[:crossing.multiplicity]
                       if "wave_vector" in m)
     ax.set_title(f"g_c = {1e3 * crossing.growth_mm:.3f} um, t_c = {crossing.time:.4f} s, N_c = "
-                 f"{crossing.wrinkle_count:.4g}\ncritical half-waves (m, n): {waves or '?'}"
+                 f"{crossing.wrinkle_count:.4g}\ncritical {wave_label}: {waves or '?'}"
                  f"\n{crossing.multiplicity} crossing together; the first shown", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=130)

@@ -125,14 +125,18 @@ def around_profile(coords: np.ndarray, disp: np.ndarray, centre=None):
 
 
 class SurfaceShape:
-    """How the permeable surface's shape is measured: an open, nearly straight surface (``along``, the bilayer)
-    or a closed one (``around``, a tube's passage). A geometry kind names its shape
+    """How the permeable surface's shape is measured: an open, nearly straight surface (``along``, the bilayer),
+    a closed one (``around``, a tube's passage), and in 3D a flat one (``plane``, the plate's top) or a
+    cylinder (``cylinder``, the 3D tube's passage; these two also give a mode's wave vector, ``wave_vector``,
+    described by ``wave_label``, and the axes of its map from above, ``map_axes``). A geometry kind names its shape
     (``GeometrySetup.wrinkles``); the counts, profiles, contact check, plots and bisection ask this object."""
 
     name = ""
     closed = False
     count_step = 0.5  # the resolution of a wrinkle count (half a wave along an open surface)
     position_label = "position along the surface [mm]"
+    wave_label = ""  # 3D surfaces: what a wave vector's two numbers count
+    map_axes = ("", "")  # 3D surfaces: the axes of the mode's map from above
 
     def order(self, coords: np.ndarray) -> np.ndarray:
         """The order of the surface's nodes along it."""
@@ -252,6 +256,8 @@ class PlaneSurface(SurfaceShape):
 
     name = "plane"
     position_label = "position on the surface [mm]"
+    map_axes = ("x [mm]", "z [mm]")
+    wave_label = "half-waves (m along x, n along z)"
     count_step = 0.0  # a count is |k| L / (2 pi) of half-wave pairs: no fixed step
 
     @staticmethod
@@ -288,10 +294,94 @@ class PlaneSurface(SurfaceShape):
         return self._project(coords, disp)
 
 
+def _periodic_weights(theta: np.ndarray) -> np.ndarray:
+    """Trapezoidal weights of sorted angles on a closed circle (they sum to 2 pi)."""
+    gaps = np.diff(np.concatenate([theta, [theta[0] + 2 * np.pi]]))
+    return 0.5 * (gaps + np.roll(gaps, 1))
+
+
+def cylinder_modes(position: np.ndarray, profile: np.ndarray) -> np.ndarray:
+    """A profile on a cylinder's tensor grid of nodes (``position``: (N, 2) angle around [rad] and z along
+    the axis) expanded in cos / sin(n theta) cos(m pi z / L_z), the shapes a tube with its ends on rollers
+    allows: the fraction of the profile's squared norm in each (n, m) (cos and sin of one n together),
+    n up to the ring's Nyquist number, m to the axis'. ``ValueError`` if the nodes are not a tensor grid."""
+    th = np.unique(np.round(position[:, 0], 9))
+    z = np.unique(np.round(position[:, 1], 12))
+    if len(th) * len(z) != len(position):
+        raise ValueError("the cylinder surface's nodes are not a tensor grid")
+    it = np.searchsorted(th, np.round(position[:, 0], 9))
+    iz = np.searchsorted(z, np.round(position[:, 1], 12))
+    f = np.zeros((len(th), len(z)))
+    f[it, iz] = profile
+    wt, wz = _periodic_weights(th), _trapezoid(z)
+    n = np.arange(len(th) // 2 + 1)
+    e = np.exp(-1j * np.outer(n, th))  # (n, node around)
+    cz = np.cos(np.pi * np.outer(np.arange(len(z)), (z - z[0]) / (z[-1] - z[0]))) if len(z) > 1 else np.ones((1, 1))
+    proj = (e * wt) @ f @ (cz * wz).T  # (n, m)
+    norm = np.outer(np.where(n == 0, 2 * np.pi, np.pi), (cz ** 2) @ wz)
+    total = float(np.einsum("i,ij,j->", wt, f ** 2, wz))
+    return np.abs(proj) ** 2 / norm / total if total > 0 else np.zeros(proj.shape)
+
+
+def cylinder_wave_vector(position: np.ndarray, profile: np.ndarray) -> tuple[int, int]:
+    """(n, m): the waves around and the half-waves along the axis of the profile's strongest
+    :func:`cylinder_modes` shape, the uniform (0, 0) excluded."""
+    energy = cylinder_modes(position, profile)
+    energy[0, 0] = -1.0
+    n, m = np.unravel_index(int(np.argmax(energy)), energy.shape)
+    return int(n), int(m)
+
+
+class CylinderSurface(SurfaceShape):
+    """A tube's passage in 3D: the radial displacement over the angle around and z along the axis, counted by
+    its strongest cos / sin(n theta) cos(m pi z / L_z) shape (:func:`cylinder_modes`); the count is n, the 2D
+    tube's."""
+
+    name = "cylinder"
+    closed = True
+    count_step = 1.0  # an integer wavenumber around, as the 2D tube's
+    position_label = "position on the passage [mm]"
+    map_axes = ("arc length around the passage [mm]", "z along the axis [mm]")
+    wave_label = "(n around, m half-waves along the axis)"
+
+    @staticmethod
+    def _project(coords: np.ndarray, disp: np.ndarray):
+        rel = coords[:, :2]
+        radius = np.linalg.norm(rel, axis=1)
+        theta = np.mod(np.arctan2(rel[:, 1], rel[:, 0]), 2 * np.pi)
+        theta[theta > 2 * np.pi - 1e-9] = 0.0  # a node at theta = 0 one roundoff below the x axis
+        return np.column_stack([theta, coords[:, 2]]), np.sum(disp[:, :2] * rel, axis=1) / radius, radius
+
+    def order(self, coords: np.ndarray) -> np.ndarray:
+        position, _, _ = self._project(coords, np.zeros_like(coords))
+        return np.lexsort((position[:, 1], position[:, 0]))
+
+    def mode_count(self, coords: np.ndarray, disp: np.ndarray) -> float:
+        return float(self.wave_vector(coords, disp)[0])
+
+    def wave_vector(self, coords: np.ndarray, disp: np.ndarray) -> tuple[int, int]:
+        """(n, m): waves around the passage and half-waves along the axis of a mode's radial displacement."""
+        position, radial, _ = self._project(coords, disp)
+        return cylinder_wave_vector(position, radial)
+
+    def detrended(self, coords: np.ndarray, disp: np.ndarray, outward: bool):
+        position, radial, _ = self._project(coords, disp)
+        return (position, radial, np.ones_like(radial),
+                np.stack([np.ones_like(radial), np.cos(position[:, 0]), np.sin(position[:, 0])], axis=1))
+
+    def count(self, position: np.ndarray, profile: np.ndarray, weights: np.ndarray) -> float:
+        return float(cylinder_wave_vector(position, profile)[0])
+
+    def plotted(self, coords: np.ndarray, disp: np.ndarray):
+        position, radial, radius = self._project(coords, disp)
+        return np.column_stack([radius.mean() * position[:, 0], position[:, 1]]), radial
+
+
 SHAPES: Registry[SurfaceShape] = Registry("surface shape")
 SHAPES.register(OpenSurface())
 SHAPES.register(ClosedSurface())
 SHAPES.register(PlaneSurface())
+SHAPES.register(CylinderSurface())
 
 
 def shape_of(problem) -> SurfaceShape:
@@ -331,8 +421,19 @@ class MeanRadial(GrowthMeasure):
         def growth() -> float:
             coords, disp = boundary_displacement(problem, problem.state.x.array,
                                                  problem.geo.facets_with_role("permeable"))
-            _, radial, weights, _ = around_profile(coords, disp, centre=(0.0, 0.0))
-            return float(-np.sum(weights * radial) / np.sum(weights))
+            if coords.shape[1] == 2:
+                _, radial, weights, _ = around_profile(coords, disp, centre=(0.0, 0.0))
+                return float(-np.sum(weights * radial) / np.sum(weights))
+            # a 3D passage: each ring z = const as in 2D, the rings' means averaged along the axis (trapezoid)
+            z = np.round(coords[:, 2], 12)
+            rings = np.unique(z)
+            means = []
+            for zr in rings:
+                at = z == zr
+                _, radial, weights, _ = around_profile(coords[at, :2], disp[at, :2], centre=(0.0, 0.0))
+                means.append(-np.sum(weights * radial) / np.sum(weights))
+            wz = _trapezoid(rings)
+            return float(np.dot(wz, means) / wz.sum())
 
         return growth
 

@@ -19,6 +19,7 @@ from app.onset.policy import AfterCrossing, CrossingPolicy
 from app.onset.screening import StabilityScreen
 from app.onset.criteria import CRITERIA, DEFAULT, Criterion
 from app.onset.crossing import Crossing
+from app.model.surface import shape_of
 
 
 @dataclass(frozen=True)
@@ -161,7 +162,7 @@ class OnsetTracker:
             self.crossings.append(crossing)
             self.log(f"  crossing #{len(self.crossings)}: t = {crossing.time:.6f} s, "
                      f"growth = {1e3 * crossing.growth_mm:.4f} um, N = {crossing.wrinkle_count:g}"
-                     + _waves(crossing))
+                     + _waves(crossing, self.problem))
             if len(self.crossings) == 1:
                 self.limits = self._other_limits()
                 self.on_first_crossing(crossing)
@@ -343,10 +344,11 @@ class Untracked:
         pass
 
 
-def _waves(crossing) -> str:
-    """A 3D crossing's critical wave vectors for its log line ('' in 2D)."""
+def _waves(crossing, problem) -> str:
+    """A 3D crossing's critical wave vectors for its log line, named by the problem's surface
+    (:attr:`app.model.surface.SurfaceShape.wave_label`); '' in 2D."""
     waves = [tuple(m["wave_vector"]) for m in crossing.modes[:crossing.multiplicity] if "wave_vector" in m]
     if not waves:
         return ""
-    return (f", half-waves (m along x, n along z) {', '.join(map(str, waves))}"
+    return (f", {shape_of(problem).wave_label} {', '.join(map(str, waves))}"
             + (f", {crossing.multiplicity} modes crossing together" if crossing.multiplicity > 1 else ""))

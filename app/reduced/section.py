@@ -5,8 +5,11 @@ Planar (``geometry.kind = "bilayer"``): Y from the substrate's base (Y = 0, roll
 the film's permeable surface (Y = H + w). The 3D plate (``"plate"``) has the same section: its laterally
 uniform state is the bilayer's, and a mode cos(m pi x / L) cos(n pi z / W) of its rollered rectangle reduces
 to the planar one at |k| = pi sqrt((m/L)^2 + (n/W)^2) (the in-plane polarized part; the antiplane part is a
-shear that stays stable), so its modes are the lattice of those |k|, numbered in increasing order. Axisymmetric (``"tube"``): r from the passage (r = R - H - w,
-the film's permeable surface) to the rigid impermeable wall (r = R: u = 0, no flux).
+shear that stays stable), so its modes are the lattice of those |k|, numbered in increasing order.
+Axisymmetric (``"tube"``): r from the passage (r = R - H - w, the film's permeable surface) to the rigid
+impermeable wall (r = R: u = 0, no flux). The 3D tube (``"tube-3d"``, ends on rollers) has the same section
+and the same axially uniform modes (n around, no axial wave: wave vector (n, 0)); its modes with axial waves
+are the 3D run's alone.
 """
 
 from __future__ import annotations
@@ -19,10 +22,11 @@ import numpy as np
 from app.model.loading import Loading
 from app.model.material import Material
 
-KINDS = ("bilayer", "tube", "plate")
+KINDS = ("bilayer", "tube", "plate", "tube-3d")
 CRITERIA = ("drained", "undrained", "rate")  # the stability criteria with a 1D counterpart (modes.py)
 # the plate's compression is uniaxial: its state is not the same in x and z, so only stripes along x reduce
-LOADINGS = {"bilayer": ("swelling", "compression"), "tube": ("swelling",), "plate": ("swelling",)}
+LOADINGS = {"bilayer": ("swelling", "compression"), "tube": ("swelling",), "plate": ("swelling",),
+            "tube-3d": ("swelling",)}
 LATTICE_WAVENUMBER = 40.0  # the plate's lattice of |k| is listed up to k w = this (above the tested maximum)
 
 
@@ -52,6 +56,7 @@ class Section:
     loading: Loading
     film: str = "film"
     width: float | None = None  # the 3D plate's width W along z (its modes: the lattice of |k|, see lattice())
+    axial: bool = False  # the 3D tube: mode n is its axially uniform mode, wave vector (n, 0)
 
     @property
     def film_layer(self) -> Layer:
@@ -100,7 +105,10 @@ class Section:
         return cached
 
     def wave_vectors(self, n: int) -> list[tuple[int, int]] | None:
-        """The plate's half-wave pairs (m, n) of mode n; None for the bilayer and the tube."""
+        """The plate's half-wave pairs (m, n) of mode n; the 3D tube's (n around, 0 along the axis); None
+        for the 2D bilayer and tube."""
+        if self.axial:
+            return [(int(n), 0)]
         return self.lattice()[1][int(n) - 1] if self.width is not None else None
 
     def local_wavenumber(self, n: float) -> float:

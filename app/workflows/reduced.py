@@ -116,7 +116,7 @@ def describe(block: dict) -> str:
         return (f"1D reduction ({block['criterion']}): the permeable surface is unstable at short waves (no "
                 f"wavelength of its own) from g = {block['growth_um']:.4f} um{bar} at t = {block['time']:.5f} s{tail}")
     waves = block.get("wave_vectors")
-    waves = f", half-waves (m, n) {', '.join(str(tuple(w)) for w in waves)}" if waves else ""
+    waves = f", wave vectors {', '.join(str(tuple(w)) for w in waves)}" if waves else ""
     return (f"1D reduction ({block['criterion']}): g_c = {block['growth_um']:.4f} um{bar}, N_c = "
             f"{block['wrinkle_count']:g}{waves} at t_c = {block['time']:.5f} s")
 
