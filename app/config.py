@@ -405,6 +405,10 @@ def validate(cfg: dict) -> None:
         if why:
             raise ConfigError("stability.crease_fluid", "= 'transient' takes the run's content from its exact 1D "
                               f"transient, which this config does not have ({why}); allowed: 'drained', 'undrained'")
+    if stab["branch_modes"] != "1" and not kind.three_d:
+        raise ConfigError("stability.branch_modes", f"= {stab['branch_modes']!r}: wave vectors pick a branch of a 3D "
+                          "multiple onset; allowed for " + repr(kind.name) + ": '1' (3D kinds: "
+                          + ", ".join(repr(k.name) for k in _kinds() if k.three_d) + ")")
     if stab["imperfection"] == 0.0:
         raise ConfigError("stability.imperfection", "= 0 is out of range; allowed: [-1, 1] except 0 (the sign picks "
                           "the direction along the mode)")

@@ -53,6 +53,13 @@ def one_of(*options):
     return (lambda v: v in options), "one of " + ", ".join(repr(o) for o in options)
 
 
+def matches(pattern: str, allowed: str):
+    """A string matching the regular expression ``pattern`` whole; ``allowed`` says what that means."""
+    import re
+
+    return (lambda v: re.fullmatch(pattern, v) is not None), allowed
+
+
 def key(type_, default, rng=None, doc="", optional=False, unit=""):
     check, allowed = rng if rng else (None, "")
     return Key(type_, default, check, allowed, doc, optional, unit)

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import REPO, on_rank0, read_csv, same_rows, same_summary
+from conftest import REPO, long_physics, on_rank0, read_csv, same_rows, same_summary
 from mpi4py import MPI
 
 from app import config
@@ -136,11 +136,10 @@ def test_the_plate_lattice_lists_equal_wavenumbers_together():
 
 
 @pytest.mark.parametrize("kind", ["plate", "tube-3d"])
-@pytest.mark.parametrize("setting, value", [("contact", True), ("creases", True), ("after_onset", "branch")])
+@pytest.mark.parametrize("setting, value", [("contact", True), ("creases", True)])
 def test_the_2d_only_options_are_refused_in_3d_with_one_line(shared_tmp, capsys, setting, value, kind):
-    """Self-contact, the trial crease and the branch's end checks read the surface as a curve: a plate or 3D
-    tube config asking for them gets one line naming the key and what is allowed, exit 2, and no result
-    directory."""
+    """Self-contact and the trial crease read the surface as a curve: a plate or 3D tube config asking for them
+    gets one line naming the key and what is allowed, exit 2, and no result directory."""
     from app import cli
 
     out = shared_tmp / f"refused-{kind}-{setting}"
@@ -246,6 +245,7 @@ def test_the_3d_tube_reduces_to_the_polar_section_with_axially_uniform_modes():
 
 
 @pytest.mark.slow
+@long_physics
 def test_a_3d_tube_buckles_within_its_error_bar_of_the_polar_1d_minimum_also_on_a_finer_axial_mesh(shared_tmp, comm):
     """configs/tube-3d.toml: g_c within the 3D error bar of the 1D reduction's (axially uniform) minimum, whose
     wave vector is (n, 0); halving the elements along the axis moves g_c by less than that bar (the axial mesh
@@ -265,3 +265,145 @@ def test_a_3d_tube_buckles_within_its_error_bar_of_the_polar_1d_minimum_also_on_
     assert fine["mesh"]["elements_along_axis"] == 2 * summary["mesh"]["elements_along_axis"]
     g = fine["critical"]["growth_um"]
     assert abs(g - c["growth_um"]) <= bar and abs(g - r["growth_um"]) <= bar, (g, c["growth_um"], bar)
+
+
+def _plate_grid(L: float = 0.3, W: float = 0.2, nx: int = 30, nz: int = 20):
+    x, z = np.meshgrid(np.linspace(0, L, nx + 1), np.linspace(0, W, nz + 1), indexing="ij")
+    return np.column_stack([x.ravel(), z.ravel()]), x.ravel(), z.ravel(), L, W
+
+
+@pytest.mark.parametrize("field, pattern", [
+    (lambda x, z, L, W: np.cos(4 * math.pi * x / L), "stripes"),
+    (lambda x, z, L, W: np.cos(3 * math.pi * x / L) * np.cos(2 * math.pi * z / W), "checkerboard"),
+    (lambda x, z, L, W: np.cos(3 * math.pi * x / L) + 0.9 * np.cos(2 * math.pi * z / W), "squares"),
+    (lambda x, z, L, W: sum(np.cos(m * math.pi * x / L) * np.cos(n * math.pi * z / W)
+                            for m, n in ((3, 1), (2, 2), (1, 3), (3, 2), (2, 3), (4, 1))), "labyrinth"),
+    (lambda x, z, L, W: np.cos(3 * math.pi * x / L) + 1.5 * np.cos(3 * math.pi * x / L) * np.cos(2 * math.pi * z / W),
+     "mixed"),
+])
+def test_the_pattern_of_an_analytic_surface(field, pattern):
+    """Each rule of classify_pattern on its textbook field (plus a uniform swelling): one stripe shape, one
+    cos x cos z, two orthogonal stripe sets, six shapes of equal weight, a stripe with a stronger cos x cos z of its own x-wave."""
+    from app.model.surface import PlaneSurface, classify_pattern, surface_spectrum
+
+    pos, x, z, L, W = _plate_grid()
+    spectrum = surface_spectrum(PlaneSurface(), pos, 0.3 + field(x, z, L, W))
+    assert classify_pattern(spectrum) == pattern
+    assert sum(f for _, _, f in spectrum) == pytest.approx(1.0, rel=1e-9)  # cos x cos shapes are a basis
+
+
+def test_an_overhanging_surface_is_found_where_it_turns_over():
+    """A plate's top displaced along x by u_x = a cos(k x) (and a small u_y): the surface overhangs only where
+    dx/dX = 1 - a k sin(k X) < 0, which needs a k > 1, and it is found there."""
+    from app.model.surface import PlaneSurface
+
+    L, W, n = 0.1, 0.05, 40
+    x, z = np.meshgrid(np.linspace(0, L, n + 1), np.linspace(0, W, n // 2 + 1), indexing="ij")
+    coords = np.column_stack([x.ravel(), np.full(x.size, 0.06), z.ravel()])
+    k = 2 * math.pi / L
+    for a, folds in ((0.5 / k, False), (2.0 / k, True)):  # u_x = a cos(k x): dx/dX = 1 - a k sin(k X)
+        disp = np.column_stack([a * np.cos(k * x.ravel()), 0.01 * np.sin(k * x.ravel()), np.zeros(x.size)])
+        where = PlaneSurface().overhang(coords, disp)
+        assert (where is not None) == folds
+        if folds:  # where 1 - a k sin(k X) < 0: L / 12 < X < 5 L / 12
+            assert L / 12 - L / n < where[0] < 5 * L / 12 + L / n and where[1] == pytest.approx(0.06)
+
+
+# --- past the onset in 3D -----------------------------------------------------------------------------------
+# configs/plate-branches.toml: a square plate two wavelengths wide, (2, 0) and (0, 2) crossing together,
+# followed to t = 1 s (1.34 g_c)
+QUIET = ["output.fields=false", "output.plot=false", "reduced.beside_2d=false"]
+
+
+def _branch(modes: str | None = None, **stability) -> dict:
+    extra = [f'stability.branch_modes="{modes}"'] if modes else []
+    extra += [f'stability.{k}="{v}"' for k, v in stability.items()]
+    return config.load(REPO / "configs" / "plate-branches.toml", QUIET + extra)
+
+
+def _grand_potential(rows: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    t = np.array([float(r["time"]) for r in rows])
+    return t, np.array([float(r["energy"]) - float(r["mu_bar"]) * float(r["fluid_volume"]) for r in rows])
+
+
+@pytest.mark.slow
+@long_physics
+def test_the_competing_branches_of_a_square_plate(shared_tmp, comm):
+    """At the double onset (2, 0) & (0, 2): the branches started from the pure stripes (2, 0) and (0, 2) are
+    mirror images (the same energy, fluid and amplitude at every step, to 1e-10); the one started from both
+    is squares at every reported state; every followed branch holds less grand potential (Psi - mu V) than
+    the unbuckled path at the same time, and releases more of it as it grows (energy decreases along the
+    followed path relative to the path it left)."""
+    runs = {m: simulate(_branch(m), shared_tmp / m.replace(":", "").replace("+", "_"), comm, progress=False)
+            for m in ("2:0", "0:2", "2:0+0:2")}
+    flat = simulate(_branch(after_onset="fundamental"), shared_tmp / "flat", comm, progress=False)
+    for s in runs.values():
+        assert s["status"] == "buckled" and sorted(tuple(m["wave_vector"]) for m in s["critical"]["modes"][:2]) == \
+            [(0, 2), (2, 0)] and s["critical"]["multiplicity"] == 2
+    rows = {m: read_csv(shared_tmp / m.replace(":", "").replace("+", "_") / "history.csv") for m in runs}
+    a, b = rows["2:0"], rows["0:2"]
+    assert len(a) == len(b)
+    for ra, rb in zip(a, b):
+        for key in ("time", "energy", "fluid_volume", "amplitude_mm", "growth_mm"):
+            assert abs(float(ra[key]) - float(rb[key])) <= 1e-10 * max(abs(float(ra[key])), 1e-12), key
+    squares = runs["2:0+0:2"]["postbuckling"]["patterns"]
+    assert len(squares) >= 3 and all(p["pattern"] == "squares" for p in squares)
+    tf, gf = _grand_potential(read_csv(shared_tmp / "flat" / "history.csv"))
+    for m, s in runs.items():
+        t, g = _grand_potential(rows[m])
+        t_switch = s["postbuckling"]["switches"][0]["time"]
+        later = t > t_switch + 0.02
+        release = np.interp(t[later], tf, gf) - g[later]
+        assert (release > 0).all() and release[-1] > 10 * release[0], m
+        end = s["postbuckling"]["end"]
+        assert end["time"] == pytest.approx(1.0) and end["grand_potential"] < gf[-1]
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size != 2, reason="compares a 1-rank and a 2-rank run")
+def test_a_plate_branch_on_one_and_two_ranks(shared_tmp, comm):
+    """The same steps, crossings, history and patterns on the branch (measured: 2e-9 at worst); the Newton
+    iteration and factorization counts on the branch are left out (measured: 14 of 26 branch steps differ by
+    1-5 iterations, 202 against 212 factorizations: near the symmetric squares state the minimizer's line search
+    and inertia correction react to roundoff, which the partition decides; the states they reach agree)."""
+    cfg = _branch("2:0+0:2")
+    world = simulate(cfg, shared_tmp / "two", comm, progress=False)
+    one = on_rank0(simulate, cfg, shared_tmp / "one", MPI.COMM_SELF, progress=False)
+    same_summary(one, world, 1e-8, counters=False)
+    assert [p["pattern"] for p in one["postbuckling"]["patterns"]] == [p["pattern"] for p in world["postbuckling"]["patterns"]]
+    assert world["postbuckling"]["end"]["grand_potential"] == pytest.approx(one["postbuckling"]["end"]["grand_potential"],
+                                                                           rel=1e-8)
+    same_rows(*([{k: v for k, v in r.items() if k != "newton_its"} for r in read_csv(shared_tmp / d / "history.csv")]
+                for d in ("one", "two")), 1e-8)
+
+
+@pytest.mark.slow
+@long_physics
+def test_a_plate_branch_resumes_like_an_uninterrupted_run(shared_tmp, comm):
+    """Stopped on the branch (after the switch, step 50), resumed from its checkpoint: the same history,
+    patterns and end energy."""
+    cfg = _branch("2:0+0:2")
+    cfg["output"]["checkpoint_every"] = 3
+    full = simulate(cfg, shared_tmp / "full", comm, progress=False)
+    part = shared_tmp / "part"
+    stopped = simulate(cfg, part, comm, progress=False, stop_after=50)
+    assert stopped["status"] == "interrupted" and full["postbuckling"]["switches"][0]["time"] < stopped["final"]["time"]
+    resumed = simulate(cfg, part, comm, progress=False, resume=checkpoint.check(part, cfg, comm))
+    same_rows(read_csv(shared_tmp / "full" / "history.csv"), read_csv(part / "history.csv"), 1e-10)
+    same_summary(full, resumed, 1e-10)
+    assert [p["pattern"] for p in resumed["postbuckling"]["patterns"]] == \
+        [p["pattern"] for p in full["postbuckling"]["patterns"]]
+    assert resumed["postbuckling"]["end"]["grand_potential"] == pytest.approx(
+        full["postbuckling"]["end"]["grand_potential"], rel=1e-10)
+
+
+@pytest.mark.parametrize("kind, modes, says", [("bilayer", "2:0", "wave vectors pick a branch of a 3D"),
+                                                ("plate", "2,0", "joined by '+'"), ("plate", "1+2", "joined by '+'")])
+def test_branch_modes_are_wave_vectors_of_a_3d_kind(kind, modes, says):
+    """stability.branch_modes: 'i:j' shapes joined by '+', on a 3D kind only; else a one-line ConfigError
+    naming the key and what is allowed."""
+    from app.schema import ConfigError
+
+    with pytest.raises(ConfigError) as err:
+        config.resolve({"geometry": {"kind": kind}, "stability": {"branch_modes": modes}}, [])
+    assert "stability.branch_modes" in str(err.value.args[0]) + str(err.value) and says in str(err.value)
+    assert config.resolve({"geometry": {"kind": "plate"}, "stability": {"branch_modes": "2:0+0:2"}}, [])

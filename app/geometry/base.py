@@ -165,6 +165,9 @@ class GeometryKind:
                               f"by {factor:g}; allowed: a multiple of {factor ** -exponent:g}")
         return value, {"mesh.element_size": value, "mesh.film_layers": int(round(layers))}
 
+    #: a 3D kind (hexahedra; its modes have wave vectors, stability.branch_modes may pick among them)
+    three_d: ClassVar[bool] = False
+
     #: a trial crease (stability.creases, app.onset.creases) can be placed: crease_setup and crease_line
     creases: ClassVar[bool] = False
 

@@ -16,6 +16,7 @@ class Plate(GeometryKind):
     # swelling only: under a uniaxial drive the in-plane base state is anisotropic, so the 1D reduction over
     # |k| that certifies a plate's onset does not apply (compression stays a plane-strain bilayer loading)
     provides = frozenset()
+    three_d = True
     # a plate a few wavelengths wide at a size whose onset (with its error bar) takes minutes on 2 cores
     mesh_defaults = {"element_size": 0.0125, "film_layers": 2}
     film_element_fraction = 1.25
@@ -37,9 +38,6 @@ class Plate(GeometryKind):
             if cfg["stability"][name]:
                 raise ConfigError(f"stability.{name}", "= true is 2D only; allowed for geometry.kind = 'plate': "
                                   "false (docs/three-d.md, known gaps)")
-        if cfg["stability"]["after_onset"] == "branch":  # the branch's end checks (self-contact) are 2D
-            raise ConfigError("stability.after_onset", "= 'branch' is 2D only; allowed for geometry.kind = 'plate': "
-                              "'stop', 'fundamental' (docs/three-d.md, known gaps)")
 
     def estimate(self, cfg: dict) -> dict:
         from meshes.bilayer import film_interface_height, substrate_layer_count

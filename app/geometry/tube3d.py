@@ -15,6 +15,7 @@ from app.schema import ConfigError, gt, in_closed, key
 class Tube3D(Tube):
     name = "tube-3d"
     provides = frozenset()
+    three_d = True
     # a short tube segment whose onset (with its error bar) takes minutes on 2 cores
     mesh_defaults = {"element_size": 0.01, "film_layers": 2}
     film_element_fraction = 1.0
@@ -34,9 +35,6 @@ class Tube3D(Tube):
             if cfg["stability"][name]:
                 raise ConfigError(f"stability.{name}", f"= true is 2D only; allowed for geometry.kind = "
                                   f"'{self.name}': false (docs/three-d.md, known gaps)")
-        if cfg["stability"]["after_onset"] == "branch":
-            raise ConfigError("stability.after_onset", f"= 'branch' is 2D only; allowed for geometry.kind = "
-                              f"'{self.name}': 'stop', 'fundamental' (docs/three-d.md, known gaps)")
 
     def axial_elements(self, cfg: dict) -> int:
         geo, mesh = cfg["geometry"], cfg["mesh"]

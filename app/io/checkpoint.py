@@ -458,8 +458,10 @@ def _read(path: Path, cfg: dict) -> tuple[dict, dict | None]:
         if PROFILE_MEMBERS["time"] in arrays:
             profiles = {name: arrays[member] for name, member in PROFILE_MEMBERS.items()}
             steps = profiles["time"].shape
-            if (profiles["growth_mm"].shape != steps or profiles["position"].ndim != 2
-                    or profiles["position"].shape[0] != steps[0] or profiles["profile"].shape != profiles["position"].shape):
+            # position: (steps, nodes) along a curve, (steps, nodes, 2) over a 3D surface
+            if (profiles["growth_mm"].shape != steps or profiles["position"].ndim not in (2, 3)
+                    or profiles["position"].shape[0] != steps[0]
+                    or profiles["profile"].shape != profiles["position"].shape[:2]):
                 raise ValueError("the surface profiles' arrays do not match")
     except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile) as err:
         reason = f"{type(err).__name__}: {err}".replace("\n", " ")

@@ -321,13 +321,15 @@ class ResultWriter:
         except ResultWriteError as err:
             self._record(err)
 
-    def plot_branch(self, profiles, critical: dict | None) -> None:
+    def plot_branch(self, profiles, critical: dict | None, shape=None, patterns: list | None = None) -> None:
         """After a followed branch: the surface profiles themselves, profiles.npz (growth, time, position and
         profile of every step on the branch; :class:`app.model.surface.SurfaceProfiles`), and wrinkles.png
-        and amplitude.png if plots are written (collective, like :meth:`plot_history`)."""
+        and amplitude.png if plots are written (collective, like :meth:`plot_history`). In 3D (``shape``: a
+        surface, with ``patterns``, :func:`app.model.surface.branch_patterns`) pattern.png replaces
+        wrinkles.png: the surface from above at those states."""
         if not profiles:
             return
-        from app.io.plots import amplitude_plot, wrinkles_plot
+        from app.io.plots import amplitude_plot, pattern_plot, wrinkles_plot
 
         def save_npz(tmp):
             with open(tmp, "wb") as f:
@@ -336,9 +338,12 @@ class ResultWriter:
         outputs = [("profiles.npz", save_npz)]
         if self.settings.plot:
             creases = {float(r["time"]): int(r["creases"]) for r in self.rows if r.get("creases") not in (None, "")}
-            outputs += [("wrinkles.png", lambda tmp: wrinkles_plot(profiles.tuples(), critical, profiles.closed, tmp,
-                                                                   creases=creases)),
-                        ("amplitude.png", lambda tmp: amplitude_plot(self.rows, critical, tmp))]
+            if shape is not None and shape.surface_dim == 2:
+                outputs.append(("pattern.png", lambda tmp: pattern_plot(profiles, patterns or [], shape, tmp)))
+            else:
+                outputs.append(("wrinkles.png", lambda tmp: wrinkles_plot(profiles.tuples(), critical, profiles.closed,
+                                                                          tmp, creases=creases)))
+            outputs.append(("amplitude.png", lambda tmp: amplitude_plot(self.rows, critical, tmp)))
 
         def files():
             for name, write in outputs:

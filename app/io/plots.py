@@ -109,6 +109,38 @@ def mode_map_plot(profile, crossing, path, axes=("x [mm]", "z [mm]"), wave_label
     plt.close(fig)
 
 
+def pattern_plot(profiles, patterns: list[dict], shape, path) -> None:
+    """A followed 3D branch seen from above at the states of ``patterns``
+    (:func:`app.model.surface.branch_patterns`): the surface's detrended normal displacement as a colour map,
+    each panel titled with its growth, pattern and strongest shapes (a passage is shown unrolled)."""
+    import numpy as np
+
+    index = {t: i for i, t in enumerate(profiles.time)}
+    picks = [(index[p["time"]], p) for p in patterns if p["time"] in index] or [(len(profiles) - 1, None)]
+    fig, axes = plt.subplots(1, len(picks), figsize=(4.2 * len(picks), 4.4), squeeze=False)
+    for ax, (i, p) in zip(axes[0], picks):
+        position, value = profiles.position[i], profiles.profile[i]
+        if shape.name == "cylinder":  # angle -> arc length on the mean passage radius is not kept: degrees
+            position = np.column_stack([np.degrees(position[:, 0]), position[:, 1]])
+        scale = np.abs(value).max() or 1.0
+        tpc = ax.tricontourf(position[:, 0], position[:, 1], 1e3 * value, levels=21, cmap="RdBu_r",
+                             vmin=-1e3 * scale, vmax=1e3 * scale)
+        fig.colorbar(tpc, ax=ax, label="normal displacement, detrended [um]", shrink=0.8)
+        if shape.name != "cylinder":
+            ax.set_aspect("equal")
+        ax.set_xlabel("angle around the passage [deg]" if shape.name == "cylinder" else shape.map_axes[0])
+        ax.set_ylabel(shape.map_axes[1])
+        title = f"g = {1e3 * profiles.growth_mm[i]:.3f} um"
+        if p is not None:
+            ratio = f" ({p['growth_over_g_c']:.2f} g_c)" if p.get("growth_over_g_c") else ""
+            shapes = ", ".join(f"({a}, {b}) {100 * f:.0f}%" for a, b, f in p["shapes"][:3])
+            title += f"{ratio}\n{p['pattern']}: {shapes}"
+        ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def convergence_plot(rows: list[dict], report: dict, path) -> None:
     """g_c against the refinement parameter per study, and the estimated error (log-log)."""
     import numpy as np
@@ -157,27 +189,40 @@ def _series(rows):
     return out
 
 
+def numeric(rows: list[dict]) -> bool:
+    """Whether a study's swept values are numbers (else a string key, e.g. stability.branch_modes)."""
+    try:
+        [float(r["value"]) for r in rows]
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
 def study_plot(rows: list[dict], title: str, param: str, path) -> None:
     """g_c and N_c against the swept parameter (two panels, one line per series), like the paper's
     study figures; error bars where a discretization error was estimated."""
     import numpy as np
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    labels = [] if numeric(rows) else list(dict.fromkeys(str(r["value"]) for r in rows))  # a string key: categories
     for i, (label, rs) in enumerate(_series(rows).items()):
         ok = [r for r in rs if r["g_c_um"] is not None]
         if not ok:
             continue
-        x = np.array([float(r["value"]) for r in ok])
+        x = np.array([float(r["value"]) if not labels else labels.index(str(r["value"])) for r in ok])
         g = np.array([r["g_c_um"] for r in ok])
         err = np.array([r["g_c_error_um"] or 0.0 for r in ok])
         ax1.errorbar(x, g, yerr=err if err.any() else None, fmt="o-", color=f"C{i}", label=label or None,
                      capsize=3, ms=4)
         ax2.plot(x, [r["N_c"] for r in ok], "s-", color=f"C{i}", label=label or None, ms=4)
-        stable = [float(r["value"]) for r in rs if r["status"] == "stable"]
+        stable = [float(r["value"]) if not labels else labels.index(str(r["value"])) for r in rs
+                  if r["status"] == "stable"]
         if stable:
             ax1.plot(stable, [g.min()] * len(stable), "x", color=f"C{i}", label="no onset (stable)")
     for ax, ylabel in ((ax1, "critical growth g_c [um]"), (ax2, "wrinkle count N_c")):
         ax.set_xlabel(param.split(".")[-1].replace("_", " "))
+        if labels:
+            ax.set_xticks(range(len(labels)), labels)
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
@@ -206,6 +251,15 @@ def modes_gallery(rows: list[dict], outdir, title: str, path) -> None:
     for ax, r in zip(axes.flat, cases):
         ax.set_axis_on()
         data = np.loadtxt(outdir / r["directory"] / "mode_surface.csv", delimiter=",", skiprows=1, ndmin=2)
+        if data.shape[1] == 9:  # a 3D surface (x, y, z, mode, state): its normal mode displacement from above
+            normal = int(np.argmin(np.ptp(data[:, :3], axis=0)))
+            a, b = (k for k in range(3) if k != normal)
+            ax.tricontourf(data[:, a], data[:, b], data[:, 3 + normal], levels=15, cmap="RdBu_r")
+            ax.set_aspect("equal")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.set_title(f"{r['value']}: g_c={r['g_c_um']:.3g} um", fontsize=8)
+            continue
         xy, mode, state = data[:, :2], data[:, 2:4], data[:, 4:6]
         closed = np.allclose(xy.mean(axis=0), 0.0, atol=0.05 * np.ptp(xy))
         if closed:
@@ -223,7 +277,7 @@ def modes_gallery(rows: list[dict], outdir, title: str, path) -> None:
             t, un, _ = along_profile(xy, mode)
             ax.plot(t - t.min(), un / (np.abs(un).max() or 1.0), "-", color="C0", lw=0.7)
             ax.set_yticks([])
-        ax.set_title(f"{r['value']:g}: g_c={r['g_c_um']:.3g} um, N={r['N_c']:g}", fontsize=8)
+        ax.set_title(f"{r['value']}: g_c={r['g_c_um']:.3g} um, N={r['N_c']:g}", fontsize=8)
     fig.suptitle(f"critical modes: {title}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

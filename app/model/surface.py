@@ -136,6 +136,7 @@ class SurfaceShape:
     count_step = 0.5  # the resolution of a wrinkle count (half a wave along an open surface)
     position_label = "position along the surface [mm]"
     wave_label = ""  # 3D surfaces: what a wave vector's two numbers count
+    surface_dim = 1  # the permeable surface is a curve (2D) or a surface (3D: plane, cylinder)
     map_axes = ("", "")  # 3D surfaces: the axes of the mode's map from above
 
     def order(self, coords: np.ndarray) -> np.ndarray:
@@ -255,6 +256,7 @@ class PlaneSurface(SurfaceShape):
     displacement over the two in-plane axes, counted by its strongest cos x cos shape (:func:`plane_modes`)."""
 
     name = "plane"
+    surface_dim = 2
     position_label = "position on the surface [mm]"
     map_axes = ("x [mm]", "z [mm]")
     wave_label = "half-waves (m along x, n along z)"
@@ -292,6 +294,12 @@ class PlaneSurface(SurfaceShape):
 
     def plotted(self, coords: np.ndarray, disp: np.ndarray):
         return self._project(coords, disp)
+
+    def overhang(self, coords: np.ndarray, disp: np.ndarray):
+        """Where the deformed surface first overhangs (:func:`overhang`), else None."""
+        _, (a, b) = plane_axes(coords)
+        ia, ib, sizes = _tensor_grid(coords[:, a], coords[:, b])
+        return overhang(coords, disp, ia, ib, sizes)
 
 
 def _periodic_weights(theta: np.ndarray) -> np.ndarray:
@@ -338,6 +346,7 @@ class CylinderSurface(SurfaceShape):
     tube's."""
 
     name = "cylinder"
+    surface_dim = 2
     closed = True
     count_step = 1.0  # an integer wavenumber around, as the 2D tube's
     position_label = "position on the passage [mm]"
@@ -375,6 +384,44 @@ class CylinderSurface(SurfaceShape):
     def plotted(self, coords: np.ndarray, disp: np.ndarray):
         position, radial, radius = self._project(coords, disp)
         return np.column_stack([radius.mean() * position[:, 0], position[:, 1]]), radial
+
+    def overhang(self, coords: np.ndarray, disp: np.ndarray):
+        """Where the deformed passage first overhangs (:func:`overhang`, periodic around), else None."""
+        position, _, _ = self._project(coords, np.zeros_like(coords))
+        it, iz, sizes = _tensor_grid(position[:, 0], position[:, 1], (9, 12))
+        return overhang(coords, disp, it, iz, sizes, periodic=True)
+
+
+def _tensor_grid(a: np.ndarray, b: np.ndarray, digits: tuple[int, int] = (12, 12)):
+    """(index along a, index along b, sizes) of nodes lying on a tensor grid of the values a and b (rounded to
+    ``digits``); ``ValueError`` if they do not."""
+    ua, ub = np.unique(np.round(a, digits[0])), np.unique(np.round(b, digits[1]))
+    if len(ua) * len(ub) != len(a):
+        raise ValueError("the surface's nodes are not a tensor grid")
+    return np.searchsorted(ua, np.round(a, digits[0])), np.searchsorted(ub, np.round(b, digits[1])), (len(ua), len(ub))
+
+
+def overhang(coords: np.ndarray, disp: np.ndarray, ia: np.ndarray, ib: np.ndarray, sizes, periodic: bool = False):
+    """The reference centre of the first grid cell of a 3D surface whose deformed normal has turned by 90
+    degrees or more from its reference normal (the surface overhangs: no longer a graph over its reference, the
+    first stage of a fold, which a surface must pass before it can touch itself), else None. Each cell's normal
+    is the cross product of its diagonals; ``periodic``: the first index wraps around (a passage)."""
+    X = np.zeros((*sizes, 3))
+    x = np.zeros((*sizes, 3))
+    X[ia, ib] = coords
+    x[ia, ib] = coords + disp
+    if periodic:
+        X, x = np.concatenate([X, X[:1]]), np.concatenate([x, x[:1]])
+
+    def normals(P):
+        return np.cross(P[1:, 1:] - P[:-1, :-1], P[:-1, 1:] - P[1:, :-1])
+
+    N, n = normals(X), normals(x)
+    turned = np.einsum("ijk,ijk->ij", N, n) <= 0.0
+    if not turned.any():
+        return None
+    i, j = np.argwhere(turned)[0]
+    return tuple(float(v) for v in 0.25 * (X[i, j] + X[i + 1, j] + X[i, j + 1] + X[i + 1, j + 1]))
 
 
 SHAPES: Registry[SurfaceShape] = Registry("surface shape")
@@ -557,3 +604,100 @@ class SurfaceProfiles:
         return cls([float(g) for g in arrays["growth_mm"]], [float(t) for t in arrays["time"]],
                    [np.array(p, float) for p in arrays["position"]],
                    [np.array(p, float) for p in arrays["profile"]], bool(closed))
+
+
+# --- the pattern on a followed 3D branch -------------------------------------------------------------------
+
+PATTERN_MULTIPLES = (1.1, 1.25, 1.5, 2.0)  # growth / g_c of the states a 3D branch's pattern is reported at
+DOMINANT = 0.6  # a single shape (or an orthogonal pair) holding this fraction of the surface's squared norm
+
+
+def surface_spectrum(shape: SurfaceShape, position: np.ndarray, profile: np.ndarray) -> list[tuple[int, int, float]]:
+    """A 3D surface profile's shapes (i, j, fraction of its squared norm), strongest first: (m, n) half-waves
+    along x and z on a plate (:func:`plane_modes`), (n around, m along the axis) on a passage
+    (:func:`cylinder_modes`)."""
+    if shape.name == "cylinder":
+        energy = cylinder_modes(position, profile)
+    else:
+        energy, _ = plane_modes(position, profile)
+    uniform, energy[0, 0] = energy[0, 0], 0.0
+    if uniform < 1.0:  # fractions of the profile's non-uniform part
+        energy /= 1.0 - uniform
+    order = np.argsort(energy, axis=None)[::-1]
+    i, j = np.unravel_index(order, energy.shape)
+    return [(int(a), int(b), float(energy[a, b])) for a, b in zip(i, j)]
+
+
+def shape_coefficient(shape: SurfaceShape, position: np.ndarray, profile: np.ndarray, i: int, j: int) -> float:
+    """The signed projection of a 3D surface profile on one of its shapes: cos(i pi x / L) cos(j pi z / W) on a
+    plate, cos(i theta) cos(j pi z / L_z) on a passage (the profile's inner product with it over the shape's
+    own, trapezoidal weights)."""
+    if shape.name == "cylinder":
+        it, iz, sizes = _tensor_grid(position[:, 0], position[:, 1], (9, 12))
+        a = np.unique(np.round(position[:, 0], 9))
+        b = np.unique(np.round(position[:, 1], 12))
+        wa = _periodic_weights(a)
+        phi_a = np.cos(i * a)
+    else:
+        it, iz, sizes = _tensor_grid(position[:, 0], position[:, 1])
+        a = np.unique(np.round(position[:, 0], 12))
+        b = np.unique(np.round(position[:, 1], 12))
+        wa = _trapezoid(a)
+        phi_a = np.cos(np.pi * i * (a - a[0]) / (a[-1] - a[0]))
+    wb = _trapezoid(b)
+    phi_b = np.cos(np.pi * j * (b - b[0]) / (b[-1] - b[0])) if len(b) > 1 else np.ones(1)
+    f = np.zeros(sizes)
+    f[it, iz] = profile
+    return float((wa * phi_a) @ f @ (wb * phi_b) / (((phi_a ** 2) @ wa) * ((phi_b ** 2) @ wb)))
+
+
+def classify_pattern(spectrum: list[tuple[int, int, float]]) -> str:
+    """The pattern a 3D surface's spectrum describes (docs/three-d.md, "Past the onset"):
+
+    - ``stripes``: one shape with a zero index holds >= DOMINANT of the profile (crests parallel to a side;
+      on a passage, n > 0, m = 0: crests along the axis; n = 0: rings);
+    - ``checkerboard``: one shape with both indices non-zero holds >= DOMINANT (cos x cos z: bumps and dimples
+      alternating);
+    - ``squares``: two orthogonal stripe shapes (i, 0) and (0, j), each at least half the other, hold >=
+      DOMINANT together (cos x + cos z);
+    - ``labyrinth``: four or more shapes are needed to reach DOMINANT (no wave vector dominates);
+    - ``mixed``: anything else (two or three shapes that are not an orthogonal pair, e.g. a herringbone's
+      stripes and their modulation)."""
+    if not spectrum or spectrum[0][2] <= 0.0:
+        return "flat"
+    (i1, j1, f1) = spectrum[0]
+    if f1 >= DOMINANT:
+        return "stripes" if i1 == 0 or j1 == 0 else "checkerboard"
+    (i2, j2, f2) = spectrum[1] if len(spectrum) > 1 else (0, 0, 0.0)
+    pair = {(i1 == 0), (j1 == 0)} == {True, False} and {(i2 == 0), (j2 == 0)} == {True, False} and (i1 == 0) != (i2 == 0)
+    if pair and f1 + f2 >= DOMINANT and f2 >= 0.5 * f1:
+        return "squares"
+    cumulative = np.cumsum([f for _, _, f in spectrum])
+    needed = int(np.searchsorted(cumulative, DOMINANT)) + 1
+    return "labyrinth" if needed >= 4 else "mixed"
+
+
+def branch_patterns(profiles: SurfaceProfiles, shape: SurfaceShape, g_c_mm: float | None) -> list[dict]:
+    """The pattern of a followed 3D branch at the first states past PATTERN_MULTIPLES x g_c and at its last
+    state: growth, time, pattern (:func:`classify_pattern`), amplitude (half the peak-to-trough of the detrended
+    profile) and the four strongest shapes with their fractions."""
+    if not len(profiles) or shape.surface_dim != 2:
+        return []
+    picks = []
+    if g_c_mm:
+        for k in PATTERN_MULTIPLES:
+            i = next((i for i, g in enumerate(profiles.growth_mm) if g >= k * g_c_mm), None)
+            if i is not None and i not in picks:
+                picks.append(i)
+    last = len(profiles) - 1
+    if last not in picks:
+        picks.append(last)
+    out = []
+    for i in picks:
+        prof = profiles.profile[i]
+        spectrum = surface_spectrum(shape, profiles.position[i], prof)
+        out.append({"growth_mm": profiles.growth_mm[i], "time": profiles.time[i],
+                    "growth_over_g_c": profiles.growth_mm[i] / g_c_mm if g_c_mm else None,
+                    "pattern": classify_pattern(spectrum), "amplitude_mm": 0.5 * float(np.ptp(prof)),
+                    "shapes": [[a, b, f] for a, b, f in spectrum[:4]]})
+    return out

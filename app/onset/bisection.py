@@ -80,7 +80,8 @@ class Bisection:
             lambda_min_before=lam_lo, lambda_min_after=lam_hi, bracket=(lo.t, hi.t),
             negative_eigenvalues=base_count + 1, modes=modes, bisection_solves=solves, mode=mode_pair.vector,
             state=p.state.x.array.copy(), lo=lo, hi=hi, hi_count=hi_count,
-            multiplicity=max(1, hi_count - base_count))
+            multiplicity=max(1, hi_count - base_count),
+            crossing_modes=[e.vector for e in pairs_hi[base_count:]])
 
 
 def band_vertex(counts, eigenvalues, step: float = 0.5) -> float | None:

@@ -79,10 +79,13 @@ def oriented(problem, mode: np.ndarray) -> np.ndarray:
 class BranchSwitcher:
     """Applies the perturbation of :mod:`app.onset.branching` to a problem's converged state."""
 
-    def __init__(self, problem, stepper, criterion, imperfection: float, length: float, log=None):
-        """``criterion``: the run's :class:`app.onset.criteria.Criterion` (whether its mode needs its content)."""
+    def __init__(self, problem, stepper, criterion, imperfection: float, length: float, log=None, modes: str = "1"):
+        """``criterion``: the run's :class:`app.onset.criteria.Criterion` (whether its mode needs its content);
+        ``modes``: which of a multiple onset's crossing modes the first switch adds ("1", "2", "1+2", ...)."""
         self.p, self.stepper, self.criterion = problem, stepper, criterion
         self.imperfection, self.length = imperfection, length
+        # "1": the first eigenmode as computed; else the wave vectors (i, j) whose pure shapes the switch adds
+        self.modes = [] if modes == "1" else [tuple(int(v) for v in w.split(":")) for w in modes.split("+")]
         self.log = log or (lambda msg: None)
         self.switches: list[Switch] = []
 
@@ -90,7 +93,7 @@ class BranchSwitcher:
         """Perturb the current state (the crossing's unstable end) along ``crossing.mode`` and switch the
         stepper to minimizers."""
         p, st = self.p, self.stepper
-        mode = oriented(p, crossing.mode)
+        mode = self.combined(crossing) if not self.switches else oriented(p, crossing.mode)
         amplitude, _ = surface_shape(p, mode)
         if amplitude <= 0:
             amplitude = float(np.max(np.abs(mode[p.u_dofs]))) or 1.0
@@ -115,6 +118,42 @@ class BranchSwitcher:
                  f"amplitude {1e3 * rec.imperfection_mm:.4g} um" + (" (with its fluid content)" if with_flux else "")
                  + "; following the buckled branch")
         return rec
+
+    def combined(self, crossing) -> np.ndarray:
+        """The onset's mode the switch adds: the first eigenmode as computed (``modes`` "1"), or for each wave
+        vector (i, j) of ``modes`` the combination of the modes crossing together whose surface is closest to
+        the pure shape (i, j) (:func:`app.model.surface.shape_coefficient`: the combination weighted by each
+        mode's coefficient on it), scaled to unit surface amplitude, and these summed. A shape the crossing
+        modes do not contain (less than half of it) is left out, with a log line."""
+        from app.model.surface import shape_coefficient, shape_of, surface_spectrum
+
+        p = self.p
+        if not self.modes:
+            return oriented(p, crossing.mode)
+        vectors = (crossing.crossing_modes or [crossing.mode])[:max(1, crossing.multiplicity)]
+        profiles = [surface_profile(p, v, outward=False) for v in vectors]
+        shape = shape_of(p)
+        total, used = None, []
+        for i, j in self.modes:
+            c = np.array([shape_coefficient(shape, pos, prof, i, j) for pos, prof, _, _ in profiles])
+            mode = sum(ck * v for ck, v in zip(c, vectors))
+            pos, prof, _, _ = surface_profile(p, mode, outward=False)
+            share = next((f for a, b, f in surface_spectrum(shape, pos, prof) if (a, b) == (i, j)), 0.0)
+            if share < 0.5:
+                self.log(f"  stability.branch_modes: the {len(vectors)} mode(s) crossing at t = {crossing.time:.6g} s "
+                         f"hold little of the shape ({i}, {j}) ({100 * share:.0f}% of their best mix); left out")
+                continue
+            amplitude, _ = surface_shape(p, mode)
+            mode = mode / (amplitude or 1.0)
+            total = mode if total is None else total + mode
+            used.append(f"({i}, {j})")
+        if total is None:
+            self.log("  stability.branch_modes: none of the shapes asked for is among the crossing modes; adding the "
+                     "first eigenmode")
+            return oriented(p, crossing.mode)
+        self.log(f"  branch switch: adding the shape(s) {' + '.join(used)} of the {len(vectors)} mode(s) crossing "
+                 "together")
+        return total
 
     def content_flux(self, delta: np.ndarray) -> np.ndarray:
         """The flux dQ whose divergence is the drained content change of displacement ``delta`` (local q part):

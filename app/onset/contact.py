@@ -27,7 +27,7 @@ class Limit:
     """A state the model cannot represent: which ("contact" / "inverted"), where, and a sentence."""
 
     status: str
-    where: tuple[float, float]
+    where: tuple[float, ...]  # (x, y) or (x, y, z)
     detail: str
     consequence: str = "the model has no contact and no inverted elements, the branch cannot be followed further"
     overshoot: bool = False  # a converged state that a shorter step may avoid (the stepper retries it)
@@ -59,6 +59,13 @@ def surface_contact(problem, array: np.ndarray) -> Limit | None:
     """Whether the deformed permeable surface of ``array`` intersects itself (same verdict on every rank)."""
     coords, disp = boundary_displacement(problem, array, problem.geo.facets_with_role("permeable"))
     shape = shape_of(problem)
+    if shape.surface_dim == 2:  # 3D: no self-contact test of a surface; the branch ends where a fold begins
+        where = shape.overhang(coords, disp)
+        if where is None:
+            return None
+        return Limit("contact", where, "the surface overhangs (its normal has turned past 90 degrees: a fold "
+                                       "begins) near the reference point (" + ", ".join(f"{v:.4g}" for v in where)
+                     + ") mm", "3D self-contact is not modelled, the branch is not followed into the fold")
     order = shape.order(coords)
     x = (coords + disp)[order]
     pair = _segments_cross(x, shape.closed)
@@ -92,11 +99,12 @@ class InversionCheck:
         if jmin > 0:
             return None
         if self._mid is None:
-            self._mid = self.V0.tabulate_dof_coordinates()[:, :2]
+            self._mid = self.V0.tabulate_dof_coordinates()[:, :p.domain.geometry.dim]
         mine = tuple(float(v) for v in self._mid[i]) if n_owned and local == jmin else None
         where = next(w for w in p.comm.allgather(mine) if w is not None)
         # with self-contact on, only the inversion is beyond the model
-        return Limit("inverted", where, f"an element inverts (det F = {jmin:.3g}) at ({where[0]:.4g}, {where[1]:.4g}) mm",
+        return Limit("inverted", where, f"an element inverts (det F = {jmin:.3g}) at ("
+                     + ", ".join(f"{v:.4g}" for v in where) + ") mm",
                      INVERTED if p.contact is not None else Limit.consequence)
 
 

@@ -31,9 +31,10 @@ class Crossing:
     hi: object = None
     hi_count: int = 0  # negative eigenvalues at the unstable end
     multiplicity: int = 1  # eigenvalues that crossed within the final bracket (equal |k| on a square plate)
+    crossing_modes: list | None = None  # mixed-space arrays of the eigenpairs from the new one on (local; mode first)
 
     #: the arrays a crossing holds only while it is being located: never in a checkpoint
-    TRANSIENT = ("mode", "state", "lo", "hi")
+    TRANSIENT = ("mode", "state", "lo", "hi", "crossing_modes")
 
     def checkpoint_state(self) -> dict:
         """This crossing in a checkpoint's meta (JSON): every field but :attr:`TRANSIENT`."""

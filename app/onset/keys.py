@@ -3,7 +3,7 @@ criterion's parameters come from the registry (app.onset.criteria.CRITERIA) and 
 
 from __future__ import annotations
 
-from app.schema import Key, ge, in_closed, in_open, key, one_of
+from app.schema import Key, ge, in_closed, in_open, key, matches, one_of
 
 STABILITY: dict[str, Key] = {
     "enabled": key(bool, True, None, "test K for positive definiteness after every step"),
@@ -17,6 +17,12 @@ STABILITY: dict[str, Key] = {
                         "after_onset = branch: the mode's peak surface normal displacement added at the onset, "
                         "as a fraction of geometry.film_thickness (or mesh.element_size, or a .msh mesh's "
                         "sqrt(area/cells)); sign = direction, not 0"),
+    "branch_modes": key(str, "1", matches(r"1|\d+:\d+(\+\d+:\d+)*",
+                                          "'1', or wave vectors 'i:j' joined by '+', e.g. '2:0', '2:0+0:2'"),
+                        "after_onset = branch, 3D: what the switch adds at the onset: '1' the first eigenmode as "
+                        "computed (at a multiple onset any mix of the modes crossing together), or the pure shape "
+                        "of wave vector (i, j) within the modes crossing together ('2:0': stripes; '2:0+0:2' "
+                        "both, squares), to follow the competing branches of a multiple onset (docs/three-d.md)"),
     "modes": key(int, 3, in_closed(1, 50), "eigenpairs reported at the onset"),
     "eigen_every": key(int, 0, ge(0), "also compute lambda_min every n steps (0 = only at the onset)"),
     "surface_check": key(bool, True, None,

@@ -37,6 +37,7 @@ class StabilitySettings:
     params: dict = field(default_factory=lambda: {"tau": 1e-2})  # the criterion's parameters (its keys)
     imperfection: float = 0.01  # after_onset = branch: the mode's surface amplitude / film thickness
     surface_check: bool = True  # the permeable surface's short-wave limit every step (app.onset.surface)
+    branch_modes: str = "1"  # after_onset = branch: which of the onset's crossing modes the switch adds ("1+2")
 
     @classmethod
     def from_config(cls, cfg: dict) -> StabilitySettings:
@@ -45,7 +46,8 @@ class StabilitySettings:
         return cls(s["enabled"], s["tolerance"],
                    CrossingPolicy.from_flags(s["stop_at_onset"], s["max_crossings"], s.get("after_onset")),
                    s["modes"], s["eigen_every"], s["screening"], s["error_estimate"], s["criterion"],
-                   {k: s[k] for k in rule.keys}, s.get("imperfection", 0.01), s.get("surface_check", True))
+                   {k: s[k] for k in rule.keys}, s.get("imperfection", 0.01), s.get("surface_check", True),
+                   s.get("branch_modes") or "1")
 
     @property
     def rule(self) -> Criterion:
@@ -104,7 +106,8 @@ class OnsetTracker:
             from app.onset.branching import BranchSwitcher, typical_cell_size
 
             self.branch = BranchSwitcher(problem, stepper, settings.rule, settings.imperfection,
-                                         reference_length or typical_cell_size(problem), log=self.log)
+                                         reference_length or typical_cell_size(problem), log=self.log,
+                                         modes=settings.branch_modes)
             # a saddle that the minimizer's line search cannot leave is left like a crossing: a step of the
             # imperfection's size along a direction of negative curvature (app.solvers.minimizer)
             stepper.escape_length = abs(settings.imperfection) * self.branch.length
@@ -245,7 +248,7 @@ class OnsetTracker:
         st, s = self.stepper, self.settings
         solver = st.solver.counters()
         return {"postbuckling": {
-            "after_onset": s.policy.after.value, "imperfection": s.imperfection,
+            "after_onset": s.policy.after.value, "imperfection": s.imperfection, "branch_modes": s.branch_modes,
             "imperfection_mm": abs(s.imperfection) * self.branch.length,
             "switches": [w.as_dict() for w in self.branch.switches],
             "branch_crossings": [x.as_dict() for x in self.crossings[1:]],

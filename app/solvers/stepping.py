@@ -367,7 +367,7 @@ class TimeStepper:
                 new_dt = control.cut_back(dt)
                 self.log(f"  Newton did not converge (reason {res.reason}) at t = {self.t + dt:.6g} s, "
                          f"dt = {dt:.3g} s: cutting back to {new_dt:.3g} s"
-                         + (f" (its last iterate: {limit.status} near ({limit.where[0]:.4g}, {limit.where[1]:.4g}) mm)"
+                         + (f" (its last iterate: {limit.status} near (" + ", ".join(f"{v:.4g}" for v in limit.where) + ") mm)"
                             if limit is not None else ""))
                 if new_dt < control.dt_min:
                     if limits is not None:

@@ -16,7 +16,7 @@ from app.io.output import OutputSettings, ResultWriter, versions
 from app.io.writes import ResultWriteError
 from app.model.contact import COLUMNS as CONTACT_COLUMNS
 from app.model.problem import Problem
-from app.model.surface import SurfaceProfiles, surface_profile
+from app.model.surface import SurfaceProfiles, branch_patterns, shape_of, surface_profile
 from app.onset.branching import reference_length
 from app.onset.contact import contact_summary
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
@@ -89,6 +89,17 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
                         problem, stepper, tracker, settings, cfg, time.perf_counter() - wall0)
     if problem.contact is not None:
         summary["creases"] = contact_summary(problem, writer.rows)
+    shape = shape_of(problem)
+    if "postbuckling" in summary:
+        last = writer.rows[-1]  # the branch's end: competing branches compare these at the same time
+        energy, mu, fluid = (float(last[k]) for k in ("energy", "mu_bar", "fluid_volume"))
+        summary["postbuckling"]["end"] = {"time": float(last["time"]), "stored_energy": energy,
+                                          "fluid_volume": fluid, "grand_potential": energy - mu * fluid}
+        if shape.surface_dim == 2:  # 3D: the pattern on the branch
+            g_c = (summary.get("critical") or {}).get("growth_mm")
+            summary["postbuckling"]["patterns"] = branch_patterns(loop.profiles, shape, g_c)
+            if summary["postbuckling"]["patterns"]:
+                summary["postbuckling"]["end"]["pattern"] = summary["postbuckling"]["patterns"][-1]["pattern"]
     if resume:  # provenance: steps and counters cover the whole run, wall_time_s this part only
         summary["resumed_from"] = {"step": resume.meta["step"], "time": resume.meta["t"],
                                    "ranks": resume.meta["ranks"]}
@@ -97,7 +108,8 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
     tracker.destroy()
     if status != "interrupted":  # under mpirun the ranks have 1 s after a SIGTERM (docs/reliability.md)
         writer.plot_history(summary.get("critical"))
-        writer.plot_branch(loop.profiles, summary.get("critical"))
+        writer.plot_branch(loop.profiles, summary.get("critical"), shape,
+                           (summary.get("postbuckling") or {}).get("patterns"))
     _report(summary, tracker, stepper.step, outdir, log)
     try:
         for step in after if writer.error is None else ():

@@ -242,7 +242,7 @@ def _checkpoint(case: Case, comm, log):
 
 
 COLUMNS = ("series", "parameter", "value", "status", "g_c_um", "g_c_error_um", "N_c", "t_c", "mu_c",
-           "crossings", "wall_time_s", "directory", "solver", "onset")
+           "crossings", "wall_time_s", "directory", "solver", "onset", "end_time", "end_energy", "end_pattern")
 
 
 def collect(cases: list[Case], param: str) -> list[dict]:
@@ -250,7 +250,8 @@ def collect(cases: list[Case], param: str) -> list[dict]:
     for case in cases:
         row = {"series": case.series, "parameter": param, "value": case.value, "status": "missing",
                "g_c_um": None, "g_c_error_um": None, "N_c": None, "t_c": None, "mu_c": None, "crossings": "",
-               "wall_time_s": None, "directory": case.outdir.name, "solver": "2d", "onset": None}
+               "wall_time_s": None, "directory": case.outdir.name, "solver": "2d", "onset": None,
+               "end_time": None, "end_energy": None, "end_pattern": None}  # a followed branch's end
         f = case.outdir / "summary.json"
         if f.is_file() and json.loads(f.read_text()).get("solver") == "reduced-1d":
             row.update(_reduced_row(json.loads(f.read_text())))
@@ -264,6 +265,8 @@ def collect(cases: list[Case], param: str) -> list[dict]:
                        crossings=";".join(f"{c['first_mode_wrinkle_count']:g}@{c['growth_um']:.5g}"
                                           for c in crossings),
                        wall_time_s=s.get("wall_time_s"), onset="wrinkles" if crit else None)
+            end = (s.get("postbuckling") or {}).get("end") or {}
+            row.update(end_time=end.get("time"), end_energy=end.get("grand_potential"), end_pattern=end.get("pattern"))
         elif (case.outdir / "error.txt").is_file():
             row["status"] = "failed"
         rows.append(row)
@@ -284,7 +287,7 @@ def write_tables(rows: list[dict], outdir: Path, title: str, param: str) -> None
     """Rank 0: study.csv, study.png, modes.png (and isomodes.png), each written aside and renamed; a
     failure names its file (a :class:`~app.io.writes.ResultWriteError`)."""
     from app.io import writes
-    from app.io.plots import isomode_plot, modes_gallery, study_plot
+    from app.io.plots import isomode_plot, modes_gallery, numeric, study_plot
 
     writes.at(outdir, outdir.mkdir, parents=True, exist_ok=True)
 
@@ -297,7 +300,7 @@ def write_tables(rows: list[dict], outdir: Path, title: str, param: str) -> None
 
     files = {"study.csv": table, "study.png": lambda tmp: study_plot(rows, title, param, tmp),
              "modes.png": lambda tmp: modes_gallery(rows, outdir, title, tmp)}
-    if any(r["crossings"] and ";" in r["crossings"] for r in rows):
+    if any(r["crossings"] and ";" in r["crossings"] for r in rows) and numeric(rows):
         files["isomodes.png"] = lambda tmp: isomode_plot(rows, title, param, tmp)
     for name, write in files.items():
         writes.at(outdir / name, writes.replace_file, outdir / name, write)
