@@ -206,6 +206,7 @@ def test_a_tube_one_element_long_is_the_plane_strain_tube(shared_tmp, comm):
         assert r3["newton_its"] == r2["newton_its"]
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(MPI.COMM_WORLD.size != 2, reason="compares a 1-rank and a 2-rank run")
 def test_a_3d_tube_on_one_and_two_ranks(shared_tmp, comm):
     cfg = _tube("tube-3d", length=0.04)
@@ -359,6 +360,7 @@ def test_the_competing_branches_of_a_square_plate(shared_tmp, comm):
         assert end["time"] == pytest.approx(1.0) and end["grand_potential"] < gf[-1]
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(MPI.COMM_WORLD.size != 2, reason="compares a 1-rank and a 2-rank run")
 def test_a_plate_branch_on_one_and_two_ranks(shared_tmp, comm):
     """The same steps, crossings, history and patterns on the branch (measured: 2e-9 at worst); the Newton

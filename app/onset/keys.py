@@ -18,7 +18,8 @@ STABILITY: dict[str, Key] = {
                         "as a fraction of geometry.film_thickness (or mesh.element_size, or a .msh mesh's "
                         "sqrt(area/cells)); sign = direction, not 0"),
     "branch_modes": key(str, "1", matches(r"1|\d+:\d+(\+\d+:\d+)*",
-                                          "'1', or wave vectors 'i:j' joined by '+', e.g. '2:0', '2:0+0:2'"),
+                                          "matching '1' or wave vectors 'i:j' joined by '+' (e.g. '2:0+0:2'; "
+                                          "3D kinds)"),
                         "after_onset = branch, 3D: what the switch adds at the onset: '1' the first eigenmode as "
                         "computed (at a multiple onset any mix of the modes crossing together), or the pure shape "
                         "of wave vector (i, j) within the modes crossing together ('2:0': stripes; '2:0+0:2' "
