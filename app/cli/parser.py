@@ -64,7 +64,8 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--reduced", action="store_true",
                        help="every case by the exact 1D reduction (bilayer and circular tube; seconds per case, "
                             "one rank per case; default directory results/<name>-reduced)")
-    be = _add(sub, "bench", "time the default bilayer to onset at three mesh sizes", config_arg=False,
+    be = _add(sub, "bench", "time the default bilayer (or, with --set geometry.kind=plate, the 3D plate) to onset "
+              "at three mesh sizes", config_arg=False,
               output="directory for bench.json and the runs", default="results/bench")
     be.add_argument("--sizes", default="coarse,default,fine", help="comma-separated: coarse, default, fine, finer")
     be.add_argument("--ranks", help="comma-separated rank counts to launch under mpirun, e.g. 1,2")
