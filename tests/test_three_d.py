@@ -414,3 +414,29 @@ def test_branch_modes_are_wave_vectors_of_a_3d_kind(kind, modes, says):
         config.resolve({"geometry": {"kind": kind}, "stability": {"branch_modes": modes}}, [])
     assert "stability.branch_modes" in str(err.value.args[0]) + str(err.value) and says in str(err.value)
     assert config.resolve({"geometry": {"kind": "plate"}, "stability": {"branch_modes": "2:0+0:2"}}, [])
+
+
+def test_a_3d_run_writes_the_whole_stress_and_its_smallest_principal_value(shared_tmp, comm):
+    """fields.h5 of a plate: the six Cauchy stress components per cell, and stress_min_principal equal to the
+    smallest eigenvalue numpy finds for them (the UFL closed form against LAPACK), in the swollen film."""
+    import h5py
+
+    from app.io.output import FIELDS, FIELDS_3D
+
+    out = shared_tmp / "fields3d"
+    cfg = config.load(REPO / "configs" / "plate-branches.toml", ["time.end=0.5", "output.every=100",
+                                                                   "output.plot=false", "reduced.beside_2d=false"])
+    simulate(cfg, out, comm, progress=False)
+    if comm.rank:
+        return
+    with h5py.File(out / "fields.h5", "r") as h5:
+        def last(name):
+            group = h5["Function"][name]
+            return np.array(group[sorted(group, key=float)[-1]])[:, 0]
+
+        assert set(h5["Function"]) == {name for name, _ in FIELDS + FIELDS_3D}
+        S = np.zeros((len(last("stress_xx")), 3, 3))
+        for (i, j), name in {(0, 0): "xx", (1, 1): "yy", (2, 2): "zz", (0, 1): "xy", (0, 2): "xz", (1, 2): "yz"}.items():
+            S[:, i, j] = S[:, j, i] = last(f"stress_{name}")
+        smallest = np.linalg.eigvalsh(S)[:, 0]
+        assert abs(smallest).max() > 0 and np.abs(last("stress_min_principal") - smallest).max() <= 1e-7 * abs(smallest).max()

@@ -372,8 +372,26 @@ FIELDS = (
     ("stress_xx", "Cauchy stress sigma_xx [MPa], per cell"),
     ("stress_yy", "Cauchy stress sigma_yy [MPa], per cell"),
     ("stress_xy", "Cauchy stress sigma_xy [MPa], per cell"),
-    ("stress_min_principal", "smaller in-plane principal Cauchy stress [MPa] (the film's compression), per cell"),
+    ("stress_min_principal", "smaller in-plane principal Cauchy stress [MPa] (the film's compression), per cell; "
+                             "3D: the smallest principal stress"),
 )
+#: the stress components a 3D mesh adds (z: the plate's width, the tube's axis)
+FIELDS_3D = (
+    ("stress_zz", "Cauchy stress sigma_zz [MPa], per cell (3D)"),
+    ("stress_xz", "Cauchy stress sigma_xz [MPa], per cell (3D)"),
+    ("stress_yz", "Cauchy stress sigma_yz [MPa], per cell (3D)"),
+)
+
+
+def smallest_principal(sigma):
+    """The smallest eigenvalue of a symmetric 3 x 3 UFL tensor (the trigonometric closed form; an isotropic
+    tensor, where the deviator vanishes, gives its mean stress)."""
+    q = ufl.tr(sigma) / 3
+    dev = sigma - q * ufl.Identity(3)
+    p = ufl.sqrt(ufl.inner(dev, dev) / 6) + 1e-300
+    r = ufl.det(dev / p) / 2
+    r = ufl.max_value(ufl.min_value(r, 1.0), -1.0)
+    return q + 2 * p * ufl.cos(ufl.acos(r) / 3 + 2 * ufl.pi / 3)
 
 
 class _Filled:
@@ -405,10 +423,19 @@ def field_expressions(problem):
     sigma = first_piola(mat, F, s) * F.T / J
     mean = 0.5 * (sigma[0, 0] + sigma[1, 1])
     radius = ufl.sqrt((0.5 * (sigma[0, 0] - sigma[1, 1])) ** 2 + sigma[0, 1] ** 2)
+    three_d = domain.geometry.dim == 3
     exprs = {"displacement": (Vu, u), "fluid_content": (V0, s), "chemical_potential": (V0, chemical_potential(mat, F, s)),
              "J": (V0, J), "flux": (V0v, dQ / problem.tau), "stress_xx": (V0, sigma[0, 0]),
-             "stress_yy": (V0, sigma[1, 1]), "stress_xy": (V0, sigma[0, 1]), "stress_min_principal": (V0, mean - radius)}
-    return [(name, *exprs[name]) for name, _ in FIELDS]
+             "stress_yy": (V0, sigma[1, 1]), "stress_xy": (V0, sigma[0, 1]),
+             "stress_min_principal": (V0, smallest_principal(sigma) if three_d else mean - radius)}
+    if three_d:
+        exprs.update({"stress_zz": (V0, sigma[2, 2]), "stress_xz": (V0, sigma[0, 2]), "stress_yz": (V0, sigma[1, 2])})
+    return [(name, *exprs[name]) for name, _ in field_list(three_d)]
+
+
+def field_list(three_d: bool) -> tuple:
+    """(name, description) of the fields a run writes: :data:`FIELDS`, and :data:`FIELDS_3D` on a 3D mesh."""
+    return FIELDS + FIELDS_3D if three_d else FIELDS
 
 
 def _max():
