@@ -56,8 +56,20 @@ def open_one(path, arrays):
 
 
 def film_camera(view, data, band):
-    """Look at the film region: the left end of the top band, 5 band heights wide."""
-    x0, x1, y0, y1, _, _ = data.GetBounds()
+    """Look at the film region: the left end of the top band, 5 band heights wide; a 3D body from above and
+    aside (an isometric view of the whole of it)."""
+    x0, x1, y0, y1, z0, z1 = data.GetBounds()
+    if z1 - z0 > 1e-12:
+        Render(view)
+        cx, cy, cz = (x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2
+        size = max(x1 - x0, y1 - y0, z1 - z0)
+        view.CameraPosition = [cx + 1.6 * size, cy + 1.4 * size, cz + 2.0 * size]
+        view.CameraFocalPoint = [cx, cy, cz]
+        view.CameraViewUp = [0, 1, 0]
+        view.CameraParallelProjection = 0
+        view.ResetCamera()
+        Render(view)
+        return
     width = min(x1 - x0, 5 * band)
     cx, cy = x0 + width / 2, y1 - band / 2
     Render(view)  # the first render resets the camera: place it afterwards
