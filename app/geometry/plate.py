@@ -34,10 +34,6 @@ class Plate(GeometryKind):
         if mesh["element_size"] > 1.5 * geo["width"]:
             raise ConfigError("mesh.element_size", f"= {mesh['element_size']:g} is too coarse; allowed: "
                               f"<= 1.5 geometry.width = {1.5 * geo['width']:g} (one element across)")
-        for name in ("contact", "creases"):  # the surface's self-contact and the trial crease are 2D methods
-            if cfg["stability"][name]:
-                raise ConfigError(f"stability.{name}", "= true is 2D only; allowed for geometry.kind = 'plate': "
-                                  "false (docs/three-d.md, known gaps)")
 
     def estimate(self, cfg: dict) -> dict:
         from meshes.bilayer import film_interface_height, substrate_layer_count

@@ -29,13 +29,6 @@ class Tube3D(Tube):
                                    "element size along the axis / mesh.element_size (tube-3d)"),
     }
 
-    def validate(self, cfg: dict) -> None:
-        super().validate(cfg)
-        for name in ("contact", "creases"):  # the surface's self-contact and the trial crease are 2D methods
-            if cfg["stability"][name]:
-                raise ConfigError(f"stability.{name}", f"= true is 2D only; allowed for geometry.kind = "
-                                  f"'{self.name}': false (docs/three-d.md, known gaps)")
-
     def axial_elements(self, cfg: dict) -> int:
         geo, mesh = cfg["geometry"], cfg["mesh"]
         return max(1, round(geo["length"] / (mesh["element_size"] * geo["axial_element_ratio"])))

@@ -207,14 +207,7 @@ def plane_modes(position: np.ndarray, profile: np.ndarray) -> tuple[np.ndarray, 
     expanded in cos(m pi a / La) cos(n pi b / Lb), the shapes a rectangle with sides on rollers allows:
     (energy (M + 1, N + 1), the fraction of the profile's squared norm in each (m, n)), trapezoidal weights,
     m and n up to the grid's Nyquist number. ``ValueError`` if the nodes are not a tensor grid."""
-    a = np.unique(np.round(position[:, 0], 12))
-    b = np.unique(np.round(position[:, 1], 12))
-    if len(a) * len(b) != len(position):
-        raise ValueError("the plane surface's nodes are not a tensor grid")
-    ia = np.searchsorted(a, np.round(position[:, 0], 12))
-    ib = np.searchsorted(b, np.round(position[:, 1], 12))
-    f = np.zeros((len(a), len(b)))
-    f[ia, ib] = profile
+    a, b, f = _on_grid(position, profile)
     wa, wb = _trapezoid(a), _trapezoid(b)
     ca = np.cos(np.pi * np.outer(np.arange(len(a)), (a - a[0]) / (a[-1] - a[0])))  # (m, node)
     cb = np.cos(np.pi * np.outer(np.arange(len(b)), (b - b[0]) / (b[-1] - b[0]))) if len(b) > 1 else np.ones((1, 1))
@@ -298,8 +291,8 @@ class PlaneSurface(SurfaceShape):
     def overhang(self, coords: np.ndarray, disp: np.ndarray):
         """Where the deformed surface first overhangs (:func:`overhang`), else None."""
         _, (a, b) = plane_axes(coords)
-        ia, ib, sizes = _tensor_grid(coords[:, a], coords[:, b])
-        return overhang(coords, disp, ia, ib, sizes)
+        ia, ib, ua, ub = _grid_axes(coords[:, a], coords[:, b])
+        return overhang(coords, disp, ia, ib, (len(ua), len(ub)))
 
 
 def _periodic_weights(theta: np.ndarray) -> np.ndarray:
@@ -313,14 +306,7 @@ def cylinder_modes(position: np.ndarray, profile: np.ndarray) -> np.ndarray:
     the axis) expanded in cos / sin(n theta) cos(m pi z / L_z), the shapes a tube with its ends on rollers
     allows: the fraction of the profile's squared norm in each (n, m) (cos and sin of one n together),
     n up to the ring's Nyquist number, m to the axis'. ``ValueError`` if the nodes are not a tensor grid."""
-    th = np.unique(np.round(position[:, 0], 9))
-    z = np.unique(np.round(position[:, 1], 12))
-    if len(th) * len(z) != len(position):
-        raise ValueError("the cylinder surface's nodes are not a tensor grid")
-    it = np.searchsorted(th, np.round(position[:, 0], 9))
-    iz = np.searchsorted(z, np.round(position[:, 1], 12))
-    f = np.zeros((len(th), len(z)))
-    f[it, iz] = profile
+    th, z, f = _on_grid(position, profile, (9, 12))
     wt, wz = _periodic_weights(th), _trapezoid(z)
     n = np.arange(len(th) // 2 + 1)
     e = np.exp(-1j * np.outer(n, th))  # (n, node around)
@@ -388,17 +374,26 @@ class CylinderSurface(SurfaceShape):
     def overhang(self, coords: np.ndarray, disp: np.ndarray):
         """Where the deformed passage first overhangs (:func:`overhang`, periodic around), else None."""
         position, _, _ = self._project(coords, np.zeros_like(coords))
-        it, iz, sizes = _tensor_grid(position[:, 0], position[:, 1], (9, 12))
-        return overhang(coords, disp, it, iz, sizes, periodic=True)
+        it, iz, th, z = _grid_axes(position[:, 0], position[:, 1], (9, 12))
+        return overhang(coords, disp, it, iz, (len(th), len(z)), periodic=True)
 
 
-def _tensor_grid(a: np.ndarray, b: np.ndarray, digits: tuple[int, int] = (12, 12)):
-    """(index along a, index along b, sizes) of nodes lying on a tensor grid of the values a and b (rounded to
-    ``digits``); ``ValueError`` if they do not."""
+def _grid_axes(a: np.ndarray, b: np.ndarray, digits: tuple[int, int] = (12, 12)):
+    """(index along a, index along b, the grid's a values, its b values) of nodes lying on a tensor grid of the
+    values a and b (rounded to ``digits``); ``ValueError`` if they do not."""
     ua, ub = np.unique(np.round(a, digits[0])), np.unique(np.round(b, digits[1]))
     if len(ua) * len(ub) != len(a):
         raise ValueError("the surface's nodes are not a tensor grid")
-    return np.searchsorted(ua, np.round(a, digits[0])), np.searchsorted(ub, np.round(b, digits[1])), (len(ua), len(ub))
+    return np.searchsorted(ua, np.round(a, digits[0])), np.searchsorted(ub, np.round(b, digits[1])), ua, ub
+
+
+def _on_grid(position: np.ndarray, profile: np.ndarray, digits: tuple[int, int] = (12, 12)):
+    """(the grid's first-axis values, its second-axis values, the profile as an array over them) of a profile
+    on a tensor grid of nodes (``position``: (N, 2)); ``ValueError`` if the nodes are not one."""
+    ia, ib, a, b = _grid_axes(position[:, 0], position[:, 1], digits)
+    f = np.zeros((len(a), len(b)))
+    f[ia, ib] = profile
+    return a, b, f
 
 
 def overhang(coords: np.ndarray, disp: np.ndarray, ia: np.ndarray, ib: np.ndarray, sizes, periodic: bool = False):
@@ -633,21 +628,15 @@ def shape_coefficient(shape: SurfaceShape, position: np.ndarray, profile: np.nda
     plate, cos(i theta) cos(j pi z / L_z) on a passage (the profile's inner product with it over the shape's
     own, trapezoidal weights)."""
     if shape.name == "cylinder":
-        it, iz, sizes = _tensor_grid(position[:, 0], position[:, 1], (9, 12))
-        a = np.unique(np.round(position[:, 0], 9))
-        b = np.unique(np.round(position[:, 1], 12))
+        a, b, f = _on_grid(position, profile, (9, 12))
         wa = _periodic_weights(a)
         phi_a = np.cos(i * a)
     else:
-        it, iz, sizes = _tensor_grid(position[:, 0], position[:, 1])
-        a = np.unique(np.round(position[:, 0], 12))
-        b = np.unique(np.round(position[:, 1], 12))
+        a, b, f = _on_grid(position, profile)
         wa = _trapezoid(a)
         phi_a = np.cos(np.pi * i * (a - a[0]) / (a[-1] - a[0]))
     wb = _trapezoid(b)
     phi_b = np.cos(np.pi * j * (b - b[0]) / (b[-1] - b[0])) if len(b) > 1 else np.ones(1)
-    f = np.zeros(sizes)
-    f[it, iz] = profile
     return float((wa * phi_a) @ f @ (wb * phi_b) / (((phi_a ** 2) @ wa) * ((phi_b ** 2) @ wb)))
 
 
