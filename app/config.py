@@ -377,7 +377,8 @@ def validate(cfg: dict) -> None:
                           f"set either material.film.{stiffness} or material.film.modulus_ratio, not both "
                           "(use --set material.film.modulus_ratio=... alone, or remove it from the file)")
     if cfg["mesh"]["refinements"] and not kind.uniform_refinement:
-        raise ConfigError("mesh.refinements", f"= {cfg['mesh']['refinements']} applies to geometry.kind = 'msh' "
+        files = " and ".join(repr(k.name) for k in _kinds() if k.uniform_refinement)
+        raise ConfigError("mesh.refinements", f"= {cfg['mesh']['refinements']} applies to geometry.kind = {files} "
                           f"only; allowed for {kind.name!r}: 0 (refine it with mesh.element_size and "
                           "mesh.film_layers)")
     kind.validate(cfg)

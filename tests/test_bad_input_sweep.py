@@ -26,6 +26,7 @@ NUM = r"(-?[0-9.eE+-]+)"
 # keys a closed end is only valid with (other keys' checks relate them): (key, value) -> companions
 COMPANIONS = {
     ("geometry.kind", "msh"): {"geometry": MSH_BASE},
+    ("geometry.kind", "msh-3d"): {"geometry": MSH_BASE},
     # splitting a file's cells applies to the msh kind only
     ("mesh.refinements", 4): {"geometry": {"kind": "msh", **MSH_BASE}},
     # a/b = 10 at the same area needs a passage of radius < R/sqrt(10): a thick substrate
@@ -42,7 +43,7 @@ def _spec_contexts():
             name = dotted.split(".", 1)[1]
             for kind in config._kinds():
                 if name in kind.keys:
-                    geo = {"kind": kind.name, **(MSH_BASE if kind.name == "msh" else {})}
+                    geo = {"kind": kind.name, **(MSH_BASE if kind.name in ("msh", "msh-3d") else {})}
                     yield f"{dotted}[{kind.name}]", dotted, kind.keys[name], {"geometry": geo}
         else:
             yield dotted, dotted, spec, {}

@@ -17,12 +17,12 @@ from app.geometry.base import (  # noqa: F401  (the package's interface)
     kind_of,
 )
 from app.geometry.bilayer import Bilayer
-from app.geometry.msh import UserMsh
+from app.geometry.msh import UserMsh, UserMsh3D
 from app.geometry.plate import Plate
 from app.geometry.tube import EllipticTube, Tube
 from app.geometry.tube3d import Tube3D
 
-BUILTIN = (Bilayer(), Tube(), EllipticTube(), Plate(), Tube3D(), UserMsh())  # registration order = the order docs list them
+BUILTIN = (Bilayer(), Tube(), EllipticTube(), Plate(), Tube3D(), UserMsh(), UserMsh3D())  # registration order = the order docs list them
 for _kind in BUILTIN:
     KINDS.register(_kind)
 DEFAULT_KIND = "bilayer"  # the paper's film on a substrate

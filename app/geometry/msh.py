@@ -1,5 +1,6 @@
-"""Geometry kind ``msh``: the user's own 2D gmsh ``.msh`` file (quadrilaterals) whose physical groups the
-config maps to materials (``geometry.layers``) and boundary roles (``geometry.boundaries``).
+"""Geometry kinds ``msh`` and ``msh-3d``: the user's own gmsh ``.msh`` file, 2D (quadrilaterals) or 3D
+(hexahedra), whose physical groups the config maps to materials (``geometry.layers``) and boundary roles
+(``geometry.boundaries``).
 
 The file is read on rank 0 (:func:`meshes.msh.merge`) and distributed; a file that is missing, unreadable
 or lacks a named group is a ConfigError on every rank, found before anything runs."""
@@ -13,6 +14,7 @@ from app.geometry.base import BOUNDARY_ROLES, GeometryKind, GeometrySetup
 from app.schema import ConfigError, key, one_of
 
 WRINKLE_MEASURES = ("auto", "along", "around")
+SHAPES_3D = ("auto", "plane", "cylinder")
 
 if TYPE_CHECKING:
     from app.geometry.tagged import TaggedMesh
@@ -30,6 +32,7 @@ class UserMsh(GeometryKind):
     not_exportable_because = "already is a .msh file"
     named_materials = True
     uniform_refinement = True
+    dim = 2  # the file's cells: quadrilaterals (2) or hexahedra (3)
 
     def validate(self, cfg: dict) -> None:
         geo = cfg["geometry"]
@@ -57,7 +60,7 @@ class UserMsh(GeometryKind):
         """The file must exist and be a readable quadrilateral gmsh mesh with every cell group given a
         material and every named group present."""
         geo = cfg["geometry"]
-        cells, facets = physical_groups(comm, geo["file"])
+        cells, facets = physical_groups(comm, geo["file"], dim=self.dim)
         _check_groups(geo, cells, facets)
 
     def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
@@ -83,40 +86,113 @@ class UserMsh(GeometryKind):
         level = cfg["mesh"]["refinements"] + exponent
         if level < 0:
             raise ConfigError("mesh.refinements", f"= {cfg['mesh']['refinements']} cannot be coarsened "
-                              f"{-exponent} time(s): a .msh mesh is only refined (every cell split into 4); "
+                              f"{-exponent} time(s): a .msh mesh is only refined (every cell split into "
+                              f"{2 ** self.dim}); "
                               f"allowed: mesh.refinements >= {-exponent}, or refine instead of coarsening")
         return 2.0 ** -level, {"mesh.refinements": level}  # the schema checks the upper bound (variant)
 
 
-def read(comm, path: str | Path, rank: int = 0, refinements: int = 0) -> TaggedMesh:
+class UserMsh3D(UserMsh):
+    """``msh-3d``: a hexahedral 3D mesh. Its modes are described on the permeable surface, which must be flat
+    (a film's top: ``plane``, the half-waves along its two in-plane axes) or a cylinder about the z axis (a
+    tube's passage: ``cylinder``, waves around and half-waves along the axis), with its nodes on a tensor grid
+    of those two coordinates (a transfinite or extruded mesh); ``auto`` tells the two apart."""
+
+    name = "msh-3d"
+    dim = 3
+    three_d = True
+    keys = {
+        "file": key(str, None, None, "msh-3d: path of a 3D gmsh .msh file (hexahedra)", optional=True),
+        "layers": UserMsh.keys["layers"],
+        "boundaries": UserMsh.keys["boundaries"],
+        "surface": key(str, "auto", one_of(*SHAPES_3D), "msh-3d: the permeable surface on which modes are "
+                       "described: plane (flat, across a coordinate axis), cylinder (about the z axis) or auto"),
+    }
+
+    def check_input(self, cfg: dict, comm) -> None:
+        """As the 2D kind's, and the permeable surface must be one on which 3D modes are described
+        (:func:`surface_shape_of`), read from the file before anything runs."""
+        from app.geometry.tagged import gmsh_session, on_gmsh_rank
+        from meshes import msh
+
+        geo = cfg["geometry"]
+        with gmsh_session(comm, "user-msh-groups", 0) as active:
+            cells, facets = _merge(comm, Path(geo["file"]), 0, active, self.dim)
+            _check_groups(geo, cells, facets)
+            permeable = [g for g, r in geo["boundaries"].items() if r == "permeable"]
+            xyz = on_gmsh_rank(comm, 0, active, msh.facet_group_coordinates, facets, permeable)
+        surface_shape_of(xyz, geo.get("surface") or "auto", geo["file"])
+
+    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+        from app.geometry.tagged import facet_nodes
+
+        geo = cfg["geometry"]
+        tm = read(comm, geo["file"], refinements=cfg["mesh"]["refinements"], dim=3)
+        _check_groups(geo, tm.cell_names, tm.facet_names)
+        permeable = [g for g, r in geo["boundaries"].items() if r == "permeable"]
+        shape = surface_shape_of(facet_nodes(tm, permeable), geo.get("surface") or "auto", geo["file"])
+        return GeometrySetup(tm, dict(geo["layers"]), dict(geo["boundaries"]), wrinkles=shape,
+                             growth="mean_radial" if shape == "cylinder" else "mean_normal")
+
+
+def surface_shape_of(xyz, asked: str, path) -> str:
+    """The 3D surface shape (``plane`` or ``cylinder``) on which a user mesh's modes are described, checked on
+    the permeable surface's node coordinates ``xyz`` (all ranks'): flat across a coordinate axis, or at one
+    radius about the z axis, with the nodes on a tensor grid of the two surface coordinates. ConfigError naming
+    geometry.surface (or geometry.file) otherwise."""
+    import numpy as np
+
+    from app.model.surface import SHAPES
+
+    size = float(np.ptp(xyz, axis=0).max()) or 1.0
+    flat = float(np.ptp(xyz, axis=0).min()) <= 1e-9 * size
+    radius = np.linalg.norm(xyz[:, :2], axis=1)
+    round_ = radius.min() > 0 and float(np.ptp(radius)) <= 0.05 * float(radius.mean())  # chords of a refined file
+    shape = asked if asked != "auto" else "plane" if flat else "cylinder" if round_ else None
+    if shape is None or (shape == "plane" and not flat) or (shape == "cylinder" and not round_):
+        found = "flat" if flat else "a cylinder about the z axis" if round_ else "neither flat nor a cylinder about z"
+        raise ConfigError("geometry.surface", f"= {asked!r}, but the permeable surface of '{path}' is {found}; "
+                          "allowed: plane (a flat surface across a coordinate axis) or cylinder (at one radius "
+                          "about the z axis, x = y = 0), the surfaces on which 3D modes are described")
+    try:
+        SHAPES.get(shape).order(xyz)
+        SHAPES.get(shape).wave_vector(xyz, np.zeros_like(xyz))
+    except ValueError:
+        raise ConfigError("geometry.file", f"= '{path}': the nodes of its permeable surface are not a tensor grid "
+                          f"of the surface's two coordinates ({shape}); 3D modes are described on such a grid: mesh "
+                          "the body transfinite or by extrusion") from None
+    return shape
+
+
+def read(comm, path: str | Path, rank: int = 0, refinements: int = 0, dim: int = 2) -> TaggedMesh:
     """The mesh of a .msh file, split uniformly ``refinements`` times, distributed; ConfigError (key
-    ``geometry.file``) on every rank if the file is missing, unreadable, has no 2D physical groups or
-    cells other than quadrilaterals."""
+    ``geometry.file``) on every rank if the file is missing, unreadable, not of dimension ``dim``, has no
+    physical groups of cells or cells other than quadrilaterals (2D) or hexahedra (3D)."""
     from app.geometry.tagged import gmsh_session, on_gmsh_rank, to_dolfinx
     from meshes import msh
 
     path = Path(path)
     with gmsh_session(comm, "user-msh", rank) as active:
-        cells, facets = _merge(comm, path, rank, active)
+        cells, facets = _merge(comm, path, rank, active, dim)
         if refinements:
             on_gmsh_rank(comm, rank, active, msh.refine, refinements)
         return to_dolfinx(comm, rank, cells, facets, {"file": str(path), "refinements": int(refinements)})
 
 
-def physical_groups(comm, path: str | Path, rank: int = 0) -> tuple[dict[str, int], dict[str, int]]:
+def physical_groups(comm, path: str | Path, rank: int = 0, dim: int = 2) -> tuple[dict[str, int], dict[str, int]]:
     """(cell groups, facet groups) of a .msh file as name -> tag on every rank, with the same checks as
     :func:`read` but without building the mesh (for input checks before anything runs)."""
     from app.geometry.tagged import gmsh_session
 
     with gmsh_session(comm, "user-msh-groups", rank) as active:
-        return _merge(comm, Path(path), rank, active)
+        return _merge(comm, Path(path), rank, active, dim)
 
 
-def _merge(comm, path: Path, rank: int, active: bool):
+def _merge(comm, path: Path, rank: int, active: bool, dim: int = 2):
     from app.geometry.tagged import on_gmsh_rank
     from meshes import msh
 
-    result = on_gmsh_rank(comm, rank, active, msh.merge, path)
+    result = on_gmsh_rank(comm, rank, active, msh.merge, path, dim)
     if isinstance(result, str):
         raise ConfigError("geometry.file", f"= '{path}' {result}")
     return result

@@ -117,6 +117,22 @@ def boundary_points(tm: TaggedMesh, groups: list[str]) -> np.ndarray:
     return allsegs[np.sort(keep)]
 
 
+def facet_nodes(tm: TaggedMesh, groups: list[str]) -> np.ndarray:
+    """Coordinates (N, gdim) of the mesh nodes on the facets of ``groups``, gathered on every rank, each node
+    once."""
+    domain = tm.mesh
+    fdim = domain.topology.dim - 1
+    domain.topology.create_connectivity(fdim, 0)
+    f2v = domain.topology.connectivity(fdim, 0)
+    v_to_geom = compat.vertex_to_geometry(domain)
+    gdim = domain.geometry.dim
+    nodes = [v_to_geom[f2v.links(f)] for g in groups for f in tm.facets(g)]
+    local = domain.geometry.x[np.unique(np.concatenate(nodes)), :gdim] if nodes else np.zeros((0, gdim))
+    xyz = np.concatenate(domain.comm.allgather(local))
+    _, keep = np.unique(np.round(xyz, 12), axis=0, return_index=True)
+    return xyz[np.sort(keep)]
+
+
 def is_closed(tm: TaggedMesh, groups: list[str]) -> bool:
     """True if the facets of ``groups`` form closed curves (every endpoint shared by two facets)."""
     segs = boundary_points(tm, groups)
