@@ -138,11 +138,11 @@ class UserMsh3D(UserMsh):
 def surface_shape_of(xyz, asked: str, path) -> str:
     """The 3D surface shape (``plane`` or ``cylinder``) on which a user mesh's modes are described, checked on
     the permeable surface's node coordinates ``xyz`` (all ranks'): flat across a coordinate axis, or at one
-    radius about the z axis, with the nodes on a tensor grid of the two surface coordinates. ConfigError naming
+    radius about the z axis, with the nodes on a tensor grid of the two surface coordinates (as
+    :class:`app.model.surface.PlaneSurface` and ``CylinderSurface`` read them: in-plane coordinates, or the angle
+    around and z). ConfigError naming
     geometry.surface (or geometry.file) otherwise."""
     import numpy as np
-
-    from app.model.surface import SHAPES
 
     size = float(np.ptp(xyz, axis=0).max()) or 1.0
     flat = float(np.ptp(xyz, axis=0).min()) <= 1e-9 * size
@@ -154,13 +154,17 @@ def surface_shape_of(xyz, asked: str, path) -> str:
         raise ConfigError("geometry.surface", f"= {asked!r}, but the permeable surface of '{path}' is {found}; "
                           "allowed: plane (a flat surface across a coordinate axis) or cylinder (at one radius "
                           "about the z axis, x = y = 0), the surfaces on which 3D modes are described")
-    try:
-        SHAPES.get(shape).order(xyz)
-        SHAPES.get(shape).wave_vector(xyz, np.zeros_like(xyz))
-    except ValueError:
+    if shape == "plane":
+        a, b = (xyz[:, k] for k in range(3) if k != int(np.argmin(np.ptp(xyz, axis=0))))
+        digits = (12, 12)
+    else:
+        a, b = np.mod(np.arctan2(xyz[:, 1], xyz[:, 0]), 2 * np.pi), xyz[:, 2]
+        a[a > 2 * np.pi - 1e-9] = 0.0
+        digits = (9, 12)
+    if len(np.unique(np.round(a, digits[0]))) * len(np.unique(np.round(b, digits[1]))) != len(xyz):
         raise ConfigError("geometry.file", f"= '{path}': the nodes of its permeable surface are not a tensor grid "
                           f"of the surface's two coordinates ({shape}); 3D modes are described on such a grid: mesh "
-                          "the body transfinite or by extrusion") from None
+                          "the body transfinite or by extrusion")
     return shape
 
 
