@@ -7,6 +7,9 @@
   reduction's short-wave onset;
 - a homogeneous tube (ratio 1): the 2D surface onset against the 1D reduction's (the passage is
   compressed around by the swelling, so the local state is not the flat one).
+- 3D (the same check on each quadrilateral facet, the wave in every direction of the surface): the surface
+  state and half-space against the 2D ones where the state lies in a plane, a state unstable only across the
+  2D plane, and the 3D slab and the 3D tube one element long against the 2D runs' surface onsets.
 """
 
 from __future__ import annotations
@@ -125,3 +128,82 @@ def test_a_resumed_run_keeps_the_surface_onset_found_before_its_checkpoint(share
         numeric = isinstance(v, float) or (isinstance(v, list) and all(isinstance(x, float) for x in v))
         assert got[k] == (pytest.approx(v, rel=1e-12) if numeric else v), k
     assert resumed["critical"]["time"] == pytest.approx(full["critical"]["time"], rel=1e-10)
+
+
+# --- 3D (docs/three-d.md, "The short-wave surface check in 3D") ---------------------------------------------
+
+def _film():
+    return layer_materials(config.load("configs/bilayer.toml"))["film"]
+
+
+def test_the_3d_surface_state_is_the_2d_one_with_the_third_stretch_and_in_equilibrium():
+    """Tangential columns (1, 0, 0), (0, 1, 0): the laterally constrained layer of the closed form, as in 2D;
+    a sheared, stretched pair: P e_n = 0 and mu = mu_bar by the law's float evaluation. Measured 1e-12."""
+    film = _film()
+    st = SurfaceState([film, film], dim=3)
+    cols = np.array([[[1.0, 0.0], [0.0, 1.0], [0.0, 0.0]], [[0.97, 0.05], [0.02, 1.03], [0.06, -0.04]]])
+    for mu_bar in (-5.0, -0.5, 0.0):
+        F, s = st.solve(cols, mu_bar)
+        lam = theory.constrained_layer_stretch(film, mu_bar)
+        assert F[0, 2, 2] == pytest.approx(lam, rel=1e-10) and np.abs(F[0, :2, 2]).max() < 1e-12
+        assert s[0] == pytest.approx(theory.constrained_layer_fluid(film, lam), rel=1e-10)
+        P = first_piola(film, F[1], s[1])
+        assert np.abs(np.asarray(P)[:, 2]).max() < 1e-10
+        assert chemical_potential(film, F[1], s[1]) == pytest.approx(mu_bar, abs=1e-10)
+
+
+def test_the_3d_half_space_is_the_plane_strain_one_for_a_wave_in_a_plane_of_the_state():
+    """A state F = diag(F_2D, 1) (the t2 stretch 1) with the wave along t1 is the plane-strain half-space: the
+    margins agree to roundoff (measured 1e-13); the margin over the wave's directions does not depend on how
+    the frame is turned about the normal (the law is isotropic; to the scaling, below), and a state compressed along t2 only is
+    unstable in 3D where the 2D check, which sees waves along t1 only, is not. (The margin is the smallest
+    eigenvalue of the Jacobi-scaled operator: its sign is frame-independent, its size to the scaling.)"""
+    from app.reduced.halfspace import HalfSpace
+
+    film = _film()
+    h2, h3 = HalfSpace(film, "drained"), HalfSpace(film, "drained", dim=3)
+    st2, st3 = SurfaceState([film]), SurfaceState([film], dim=3)
+    for mu_bar in (-0.5, -0.05, 0.0):
+        F2, s2 = st2.solve(np.array([[1.0, 0.0]]), mu_bar)
+        F3 = np.eye(3)
+        F3[np.ix_([0, 2], [0, 2])] = F2[0]
+        margin2 = h2.margin(F2[0], float(s2[0]))
+        assert h3.margin_along(F3, float(s2[0])) == pytest.approx(margin2, rel=1e-10, abs=1e-12)
+        # isotropic in the plane: every direction the same up to the Jacobi scaling of the turned components
+        # (the margin's sign is exact, its size measured 1e-5 apart)
+        assert h3.margin(F3, float(s2[0])) == pytest.approx(margin2, rel=1e-4)
+        assert h3.definite(F3, float(s2[0])) == h2.definite(F2[0], float(s2[0])) == (margin2 > 0)
+    # compressed along t2 (0.9), not along t1, at a bath where the unstrained surface is stable; turned by 0.3 rad
+    cols = np.array([[[1.0, 0.0], [0.0, 0.9], [0.0, 0.0]]])
+    F, s = st3.solve(cols, -0.5)
+    c, sn = np.cos(0.3), np.sin(0.3)
+    Q = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+    assert h3.margin(F[0] @ Q, float(s[0])) == pytest.approx(h3.margin(F[0], float(s[0])), rel=1e-4)
+    assert h3.margin(F[0], float(s[0])) < 0 < h3.margin_along(F[0], float(s[0]))
+
+
+def test_a_3d_slab_reports_the_2d_surface_onset(shared_tmp, comm):
+    """The w = 0.05 mm strip as a plate one element wide: the surface onset of the 3D check at the 2D run's
+    (1e-8 s; the states are the same) and at the closed-form instant (1e-4 s, as in 2D), on the film's top."""
+    cfg2 = config.load("configs/bilayer.toml", W05)
+    cfg3 = config.load("configs/bilayer.toml", W05 + ["geometry.kind=plate", "geometry.width=0.01",
+                                                     "geometry.substrate_thickness=0.5"])
+    s2 = simulate(cfg2, shared_tmp / "w05-2d", comm, progress=False)["surface_onset"]
+    s3 = simulate(cfg3, shared_tmp / "w05-3d", comm, progress=False)["surface_onset"]
+    assert s3["time"] == pytest.approx(s2["time"], abs=1e-8)
+    assert s3["time"] == pytest.approx(_critical_time(cfg3), abs=1e-4)
+    assert len(s3["where"]) == 3 and s3["where"][1] == pytest.approx(0.55)
+
+
+def test_a_3d_tube_one_element_long_reports_the_2d_tube_surface_onset(shared_tmp, comm):
+    """The homogeneous tube above as a 3D tube one element long: the same passage state, and a wave along the
+    axis (where the passage keeps its stretch 1) is not the first unstable one, so the 3D check finds the 2D
+    check's onset (measured equal to the printed digits; 1e-8 s), on the passage."""
+    over = ["material.film.modulus_ratio=1", "mesh.element_size=0.04", "mesh.film_layers=2",
+            "stability.error_estimate=false", "reduced.beside_2d=false", "output.fields=false", "output.plot=false",
+            "time.end=1.0"]
+    s2 = simulate(config.load("configs/tube.toml", over), shared_tmp / "t2", comm, progress=False)["surface_onset"]
+    cfg3 = config.load("configs/tube.toml", over + ["geometry.kind=tube-3d", "geometry.length=0.04"])
+    s3 = simulate(cfg3, shared_tmp / "t3", comm, progress=False)["surface_onset"]
+    assert s3["time"] == pytest.approx(s2["time"], abs=1e-8)
+    assert np.hypot(*s3["where"][:2]) == pytest.approx(np.hypot(*s2["where"]), rel=1e-9)

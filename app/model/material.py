@@ -130,7 +130,7 @@ def chemical_potential(mat, F, s):
 
 
 def first_piola(mat, F, s):
-    """P = dpsi/dF (2x2, plane strain): UFL for UFL arguments, a 2x2 array for floats."""
+    """P = dpsi/dF (2x2 plane strain, or 3x3): UFL for UFL arguments, an array for floats."""
     if not _is_ufl(F, s):
         return mat.law.floats.first_piola(mat, F, s)
     F, s = ufl.variable(F), ufl.variable(s)
@@ -140,34 +140,42 @@ def first_piola(mat, F, s):
 class _FloatEvaluator:
     """A law's mu and P as UFL expressions of placeholder constants (parameters, F, s), differentiated
     once and evaluated by UFL for float arguments: reference values come from the same derivative the
-    forms use, not from a formula written twice."""
+    forms use, not from a formula written twice. F is 2x2 (plane strain) or 3x3; each size is built once."""
 
     def __init__(self, law: MaterialLaw):
-        from app import compat  # dolfinx only once a law is evaluated
+        self.law = law
+        self._by_dim: dict = {}
 
-        domain = compat.placeholder_domain()
-        self.params = {name: ufl.Constant(domain) for name in law.params}
-        self.F = ufl.Constant(domain, shape=(2, 2))
-        self.s = ufl.Constant(domain)
-        F, s = ufl.variable(self.F), ufl.variable(self.s)
-        bulk, constraint = law.free_energy(F, s, SimpleNamespace(**self.params))
-        psi = bulk + constraint
-        self.mu = _lowered(ufl.diff(psi, s))
-        P = _lowered(ufl.diff(psi, F))
-        self.P = [[P[i, j] for j in range(2)] for i in range(2)]
+    def _of(self, dim: int):
+        if dim not in self._by_dim:
+            from app import compat  # dolfinx only once a law is evaluated
 
-    def _mapping(self, mat, F, s) -> dict:
-        values = {c: getattr(mat, name) for name, c in self.params.items()}
-        values[self.F] = tuple(tuple(float(v) for v in row) for row in np.asarray(F, dtype=float))
-        values[self.s] = float(s)
-        return values
+            domain = compat.placeholder_domain()
+            params = {name: ufl.Constant(domain) for name in self.law.params}
+            Fc, sc = ufl.Constant(domain, shape=(dim, dim)), ufl.Constant(domain)
+            F, s = ufl.variable(Fc), ufl.variable(sc)
+            bulk, constraint = self.law.free_energy(F, s, SimpleNamespace(**params))
+            psi = bulk + constraint
+            P = _lowered(ufl.diff(psi, F))
+            self._by_dim[dim] = SimpleNamespace(params=params, F=Fc, s=sc, mu=_lowered(ufl.diff(psi, s)),
+                                                P=[[P[i, j] for j in range(dim)] for i in range(dim)])
+        return self._by_dim[dim]
+
+    def _mapping(self, mat, F, s):
+        F = np.asarray(F, dtype=float)
+        e = self._of(F.shape[0])
+        values = {c: getattr(mat, name) for name, c in e.params.items()}
+        values[e.F] = tuple(tuple(float(v) for v in row) for row in F)
+        values[e.s] = float(s)
+        return e, values
 
     def chemical_potential(self, mat, F, s) -> float:
-        return float(self.mu((), self._mapping(mat, F, s)))
+        e, m = self._mapping(mat, F, s)
+        return float(e.mu((), m))
 
     def first_piola(self, mat, F, s) -> np.ndarray:
-        m = self._mapping(mat, F, s)
-        return np.array([[float(Pij((), m)) for Pij in row] for row in self.P])
+        e, m = self._mapping(mat, F, s)
+        return np.array([[float(Pij((), m)) for Pij in row] for row in e.P])
 
 
 def _lowered(expr):

@@ -51,18 +51,32 @@ class SurfaceCheck:
         self.facets = np.array(sorted(set(int(f) for f in facets)), dtype=np.int64)
         v2g = compat.vertex_to_geometry(domain)
         x = compat.node_coordinates(domain)
+        gdim = self.dim = domain.geometry.dim
         cell_nodes = compat.cell_geometry_nodes(domain)
         self.cells = np.array([f2c.links(f)[0] for f in self.facets], dtype=np.int64)
-        ends = np.array([x[v2g[f2v.links(f)]] for f in self.facets]).reshape(-1, 2, 2)
-        self.where = ends.mean(axis=1)  # facet midpoints (reference)
-        t = ends[:, 1] - ends[:, 0]
-        t /= np.linalg.norm(t, axis=1)[:, None]
-        n = np.stack([t[:, 1], -t[:, 0]], axis=1)
-        centre = np.array([x[cell_nodes[c]].mean(axis=0) for c in self.cells]) if len(self.cells) else np.zeros((0, 2))
+        corners = 2 ** (tdim - 1)  # a facet's vertices: 2 (a segment) or 4 (a quadrilateral, tensor-product order)
+        self.vertex_nodes = np.array([v2g[f2v.links(f)] for f in self.facets], dtype=np.int64).reshape(-1, corners)
+        X = x[self.vertex_nodes][..., :gdim] if len(self.facets) else np.zeros((0, corners, gdim))
+        self.where = X.mean(axis=1)  # facet midpoints (reference)
+        J = self._tangents(X)  # (n, gdim, tdim - 1): the facet's derivatives at its midpoint
+        centre = (np.array([x[cell_nodes[c]][:, :gdim].mean(axis=0) for c in self.cells]) if len(self.cells)
+                  else np.zeros((0, gdim)))
+        t1 = J[:, :, 0] / np.linalg.norm(J[:, :, 0], axis=1)[:, None]
+        if gdim == 2:
+            n = np.stack([t1[:, 1], -t1[:, 0]], axis=1)
+        else:
+            n = np.cross(J[:, :, 0], J[:, :, 1])
+            n /= np.linalg.norm(n, axis=1)[:, None]
         flip = np.einsum("ij,ij->i", n, self.where - centre) < 0
         n[flip] *= -1.0
-        t = np.stack([n[:, 1], -n[:, 0]], axis=1)  # (t, n) a proper rotation
-        self.R = np.stack([t, n], axis=1)  # rows: tangent, outward normal
+        if gdim == 2:
+            self.R = np.stack([np.stack([n[:, 1], -n[:, 0]], axis=1), n], axis=1)  # rows: tangent, normal
+        else:
+            self.R = np.stack([t1, np.cross(n, t1), n], axis=1)  # rows: t1, t2, outward normal (right-handed)
+        # F t_b = j (J^T J)^-1 J^T t_b for the current derivatives j: the map from (dxi) to the frame's tangents
+        tang = self.R[:, :gdim - 1, :]  # (n, tdim - 1, gdim)
+        self.to_tangents = np.einsum("nab,nbg,nkg->nak", np.linalg.inv(np.einsum("nga,ngb->nab", J, J)),
+                                     np.transpose(J, (0, 2, 1)), tang) if len(J) else np.zeros((0, gdim - 1, gdim - 1))
         # the material of each facet's cell
         group_of_cell = {}
         for group in p.geo.layers:
@@ -70,8 +84,6 @@ class SurfaceCheck:
                 group_of_cell[int(c)] = group
         self.material = [p.geo.layers.get(group_of_cell.get(int(c)), None) for c in self.cells]
         # the surface state in equilibrium with the bath, one cell per facet
-        self.vertex_nodes = np.array([v2g[f2v.links(f)] for f in self.facets], dtype=np.int64).reshape(-1, 2)
-        self.length = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
         self.node_dofs = dofmaps.lagrange1_dof_nodes(p.V_u)  # geometry node of each displacement dof block
         first = next(iter(p.materials.values()))
         point_materials = [p.materials.get(name) if name else first for name in self.material]
@@ -80,27 +92,39 @@ class SurfaceCheck:
         self.equilibrium = self.halfspace = None
         for turn in (0, 1):
             if (self.comm.rank == 0) == (turn == 0):
-                self.halfspace = HalfSpace(first, self.criterion)
-                self.equilibrium = SurfaceState(point_materials or [first])
+                self.halfspace = HalfSpace(first, self.criterion, dim=gdim)
+                self.equilibrium = SurfaceState(point_materials or [first], dim=gdim)
             self.comm.barrier()
         if not len(self.facets):
             self.equilibrium = None
         self.mats = {name: p.materials[name] for name in set(self.material) if name is not None}
         self.history: list[tuple] = []  # the last step tested: (time, growth_mm, margin, tangential columns)
 
+    @staticmethod
+    def _tangents(P: np.ndarray) -> np.ndarray:
+        """The derivatives of facets' maps at their midpoints, (n, gdim, tdim - 1), from their vertices ``P``
+        (n, corners, gdim): a segment's P1 - P0; a quadrilateral's (vertices in dolfinx's tensor-product order
+        (0, 0), (1, 0), (0, 1), (1, 1)) d/dxi and d/deta of its bilinear map."""
+        if P.shape[1] == 2:
+            return (P[:, 1] - P[:, 0])[:, :, None]
+        dxi = 0.5 * ((P[:, 1] - P[:, 0]) + (P[:, 3] - P[:, 2]))
+        deta = 0.5 * ((P[:, 2] - P[:, 0]) + (P[:, 3] - P[:, 1]))
+        return np.stack([dxi, deta], axis=2)
+
     def columns(self) -> np.ndarray:
-        """The tangential column F t of every permeable facet of this rank, in the facet's frame (n, 2):
-        what the mesh resolves of the surface (the facet's deformed length and turn)."""
+        """The tangential columns F t of every permeable facet of this rank in the facet's frame: (n, 2) in 2D
+        (the facet's deformed length and turn), (n, 3, 2) in 3D (F t1 and F t2): what the mesh resolves of the
+        surface."""
         p = self.problem
-        u = p.state.x.array[p.u_dofs].reshape(-1, 2)
+        d = self.dim
+        u = p.state.x.array[p.u_dofs].reshape(-1, d)
         x = compat.node_coordinates(p.domain)
-        node_u = np.zeros((x.shape[0], 2))
+        node_u = np.zeros((x.shape[0], d))
         node_u[self.node_dofs] = u
-        du = node_u[self.vertex_nodes[:, 1]] - node_u[self.vertex_nodes[:, 0]]
-        dX = x[self.vertex_nodes[:, 1]] - x[self.vertex_nodes[:, 0]]
-        stretch = (dX + du) / self.length[:, None]
-        sign = np.sign(np.einsum("ij,ij->i", dX, self.R[:, 0]))[:, None]  # the facet's vertex order against t
-        return np.einsum("nij,nj->ni", self.R, sign * stretch)
+        j = self._tangents(x[self.vertex_nodes][..., :d] + node_u[self.vertex_nodes])  # current derivatives
+        Ft = np.einsum("nga,nak->ngk", j, self.to_tangents)  # F t_k, (n, gdim, tdim - 1)
+        cols = np.einsum("nij,njk->nik", self.R, Ft)
+        return cols[:, :, 0] if d == 2 else cols
 
     def margins(self, columns: np.ndarray, mu_bar: float, only: int | None = None, exact: bool = False) -> np.ndarray:
         """Each facet's verdict on its surface state: +1 / -1 (stable / not: a banded Cholesky), or with
@@ -164,18 +188,20 @@ class SurfaceCheck:
 
 
 class SurfaceState:
-    """The state of N surface points in equilibrium with the bath: given the tangential column c of F in the
-    surface frame, the normal column (a, b) and s with P(F, s) e_n = 0 and mu(F, s) = mu_bar, F = [[c0, a],
-    [c1, b]]. One DG0 cell per point on a 1D mesh (the law's parameters per cell), Newton on the cell-local
-    3x3 systems, warm-started from the last solution."""
+    """The state of N surface points in equilibrium with the bath: given the tangential columns of F in the
+    surface frame (one in 2D, two in 3D), the normal column a and s with P(F, s) e_n = 0 and mu(F, s) = mu_bar,
+    F = [c | a] (2D: [[c0, a0], [c1, a1]]; 3D: the frame (t1, t2, n), F = [c1 c2 a]). One DG0 cell per point
+    on a 1D mesh (the law's parameters per cell), Newton on the cell-local (dim + 1) systems, warm-started from
+    the last solution."""
 
-    def __init__(self, materials: list):
+    def __init__(self, materials: list, dim: int = 2):
         from mpi4py import MPI
 
         from app.model.material import chemical_potential, first_piola
         from app.model.potential import fields_class
 
         n = len(materials)
+        self.dim = dim
         law = materials[0].law
         d = compat.interval_mesh(MPI.COMM_SELF, np.arange(n + 1, dtype=float))
         V0 = compat.scalar_space(d, "DG", 0)
@@ -186,40 +212,49 @@ class SurfaceState:
             f.x.array[at] = [getattr(m, name) for m in materials]
             fields[name] = f
         mat = fields_class(law)(**fields)
-        self.c = [compat.Function(V0) for _ in range(2)]
+        tangents = dim - 1
+        self.c = [[compat.Function(V0) for _ in range(tangents)] for _ in range(dim)]  # c[row][column]
         self.at = at
         self.mu_bar = compat.Constant(d, compat.ScalarType(0.0))
-        W = compat.mixed_dg0_space(d, 3)
+        W = compat.mixed_dg0_space(d, dim + 1)
         self.w = compat.Function(W)
-        a, b, s = ufl.split(self.w)
-        F = ufl.as_matrix([[self.c[0], a], [self.c[1], b]])
+        parts = ufl.split(self.w)
+        a, s = parts[:dim], parts[dim]
+        F = ufl.as_matrix([[*self.c[i], a[i]] for i in range(dim)])
         P = first_piola(mat, F, s)
         mu = chemical_potential(mat, F, s)
         v = ufl.TestFunction(W)
         dx = ufl.Measure("dx", domain=d, metadata={"quadrature_degree": 1})
-        res = (P[0, 1] * v[0] + P[1, 1] * v[1] + (mu - self.mu_bar) * v[2]) * dx
+        res = (sum(P[i, dim - 1] * v[i] for i in range(dim)) + (mu - self.mu_bar) * v[dim]) * dx
         self.system = LocalSystem(compat.form(res), compat.form(ufl.derivative(res, self.w, ufl.TrialFunction(W))))
         self.dofs = []
-        for i in range(3):
+        for i in range(dim + 1):
             Vi, dofs = compat.collapse(W.sub(i))
             self.dofs.append(dofs[np.argsort(compat.dof_coordinates(Vi))])  # parent dof of point k
         x = self.w.x.array
-        x[self.dofs[1]] = 1.0
-        x[self.dofs[2]] = [m.s0 for m in materials]
+        x[self.dofs[dim - 1]] = 1.0
+        x[self.dofs[dim]] = [m.s0 for m in materials]
 
     def solve(self, column: np.ndarray, mu_bar: float, tol: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
-        """(F (N, 2, 2), s (N,)) at the tangential columns ``column`` (N, 2) and the bath's mu_bar."""
+        """(F (N, dim, dim), s (N,)) at the tangential columns ``column`` ((N, 2) in 2D, (N, 3, 2) in 3D) and
+        the bath's mu_bar."""
         import scipy.sparse as sp
         import scipy.sparse.linalg as spla
 
-        for i in range(2):
-            self.c[i].x.array[self.at] = column[:, i]
+        dim = self.dim
+        cols = np.asarray(column, dtype=float).reshape(len(column), dim, dim - 1)
+        for i in range(dim):
+            for j in range(dim - 1):
+                self.c[i][j].x.array[self.at] = cols[:, i, j]
         self.mu_bar.value = mu_bar
         x = self.w.x.array
-        ia, ib, js = self.dofs
+        js = self.dofs[dim]
+
+        def full(y):
+            return np.concatenate([cols, np.stack([y[self.dofs[i]] for i in range(dim)], axis=1)[:, :, None]], axis=2)
 
         def admissible(y):  # the law's logarithms: s > 0, det F > 0
-            return y[js].min() > 0 and (column[:, 0] * y[ib] - column[:, 1] * y[ia]).min() > 0
+            return y[js].min() > 0 and np.linalg.det(full(y)).min() > 0
 
         for _ in range(60):
             r, (indptr, indices, values) = self.system.assemble()
@@ -233,5 +268,4 @@ class SurfaceState:
                 break
         else:
             raise RuntimeError("the surface's equilibrium state did not converge")
-        F = np.stack([np.stack([column[:, 0], x[ia]], axis=1), np.stack([column[:, 1], x[ib]], axis=1)], axis=1)
-        return F, x[js].copy()
+        return full(x), x[js].copy()

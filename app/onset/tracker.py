@@ -95,13 +95,9 @@ class OnsetTracker:
         self.surface_onset: dict | None = None
         if settings.surface_check and problem.diffusion and problem.loading.surface_term \
                 and problem.geo.facets_with_role("permeable"):
-            if problem.domain.geometry.dim == 2:
-                from app.onset.surface import SurfaceCheck
+            from app.onset.surface import SurfaceCheck
 
-                self.surface = SurfaceCheck(problem, settings.rule)
-            else:  # the half-space of a facet in 3D is not built (docs/three-d.md): the 1D companion's
-                log("  the short-wave surface check is two-dimensional only: in 3D the surface onset comes from "
-                    "the 1D reduction where the geometry has one")
+            self.surface = SurfaceCheck(problem, settings.rule)
         if settings.policy.branches:
             from app.onset.branching import BranchSwitcher, typical_cell_size
 
@@ -125,9 +121,9 @@ class OnsetTracker:
         onset = self.surface.test(rec.time, rec.growth_mm)
         if onset is not None:
             self.surface_onset = onset
-            x, y = onset["where"]
+            where = ", ".join(f"{v:.4g}" for v in onset["where"])
             self.log(f"  the permeable surface became unstable at short waves (below the mesh): t = "
-                     f"{onset['time']:.6f} s, growth = {onset['growth_um']:.4f} um, at ({x:.4g}, {y:.4g}) mm")
+                     f"{onset['time']:.6f} s, growth = {onset['growth_um']:.4f} um, at ({where}) mm")
 
     def test(self, rec) -> None:
         """The verdict on the step just accepted, recorded in ``rec``; a confirmed increase is kept

@@ -272,12 +272,12 @@ def _report(summary: dict, tracker, steps: int, outdir, log) -> None:
                  f"wrinkle count N_c = {c.wrinkle_count:g}")
     so = summary.get("surface_onset")
     if so is not None:
-        x, y = so["where"]
+        where = ", ".join(f"{v:.4g}" for v in so["where"])
         first = ("before the onset above: that N_c is a wave this mesh resolves, after the surface's own "
                  "instability, which has no wavelength of its own" if tracker.crossings and so["before_critical"]
                  else "after the onset above" if tracker.crossings else "(K itself stayed positive definite)")
         log.info(f"hydrobuckle: the permeable surface is unstable at short waves (below the mesh) from t = "
-                 f"{so['time']:.6f} s, growth = {so['growth_um']:.4f} um, at ({x:.4g}, {y:.4g}) mm, {first}")
+                 f"{so['time']:.6f} s, growth = {so['growth_um']:.4f} um, at ({where}) mm, {first}")
 
 
 def summarize(status: str, message: str, last: dict, problem, stepper, tracker, settings: RunSettings, cfg: dict,
