@@ -67,7 +67,8 @@ def section(cfg: dict) -> Section:
     H, w = geo["substrate_thickness"], geo["film_thickness"]
     if geo["kind"] in ("bilayer", "plate"):
         layers = (Layer("substrate", 0.0, H), Layer("film", H, H + w))
-        return Section("planar", layers, H + w, 0.0, geo["length"], materials, loading, width=geo.get("width"))
+        return Section("planar", layers, H + w, 0.0, geo["length"], materials, loading, width=geo.get("width"),
+                       clamped=geo.get("base") == "clamped")
     R = geo["outer_radius"]
     a = R - H - w
     layers = (Layer("film", a, a + w), Layer("substrate", a + w, R))

@@ -13,7 +13,8 @@ from app import cli, config, geometry
 def test_defaults_are_the_documented_paper_case():
     cfg = config.resolve({})
     geo = {k: v for k, v in cfg["geometry"].items() if v is not None}
-    assert geo == {"kind": "bilayer", "length": 2.0, "substrate_thickness": 0.5, "film_thickness": 0.01}
+    assert geo == {"kind": "bilayer", "length": 2.0, "substrate_thickness": 0.5, "film_thickness": 0.01,
+                   "base": "rollers"}  # the paper: u_y = 0 at the base
     tube = config.resolve({"geometry": {"kind": "tube"}})["geometry"]
     assert (tube["outer_radius"], tube["substrate_thickness"], tube["film_thickness"]) == (1.0, 0.2, 0.02)
     assert cfg["material"]["film"]["modulus_ratio"] == 8.0

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from app.registry import Registry
-from app.schema import ConfigError, Key, gt, key
+from app.schema import ConfigError, Key, gt, key, one_of
 
 BOUNDARY_ROLES = ("permeable", "impermeable", "free", "fixed", "roller_x", "roller_y", "roller_z")
 # displacement components a role holds at zero (a 2D mesh has components 0 and 1 only)
@@ -98,6 +98,22 @@ def layer_keys(substrate: float, film: float) -> dict[str, Key]:
     """The thickness keys of a kind with a film on a substrate, with that kind's defaults [mm]."""
     return {"substrate_thickness": key(float, substrate, gt(0), "H [mm]", unit="mm"),
             "film_thickness": key(float, film, gt(0), "w [mm]", unit="mm")}
+
+
+BASES = ("rollers", "clamped")
+
+
+def base_key():
+    """``geometry.base`` of a film on a substrate (bilayer, plate): the substrate's base on rollers (u_y = 0,
+    the paper's) or clamped (u = 0); both impermeable. The laterally uniform state is the same, so the exact
+    1D reduction covers both (its modes held accordingly at the base)."""
+    return key(str, "rollers", one_of(*BASES), "the substrate's base: rollers (u_y = 0, the paper's) or clamped "
+               "(u = 0); impermeable either way")
+
+
+def base_role(geo: dict) -> str:
+    """The boundary role of the substrate's base for ``geometry.base``."""
+    return "fixed" if geo.get("base") == "clamped" else "roller_y"
 
 
 def structured_size(along: int, layers: int, closed: bool, what: str) -> dict:

@@ -1,11 +1,12 @@
 """Geometry kind ``bilayer``: the paper's flat film on a substrate (Fig. "bi_geo"): u_x = 0 left and
-right, u_y = 0 at the bottom, fluid enters at the top; a displacement loading moves the right edge."""
+right, u_y = 0 at the bottom (or u = 0: ``geometry.base = "clamped"``), fluid enters at the top; a
+displacement loading moves the right edge."""
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from app.geometry.base import Drive, GeometryKind, GeometrySetup, layer_keys
+from app.geometry.base import Drive, GeometryKind, GeometrySetup, base_key, base_role, layer_keys
 from app.schema import ConfigError, gt, key
 
 if TYPE_CHECKING:
@@ -21,6 +22,7 @@ class Bilayer(GeometryKind):
     keys = {
         "length": key(float, 2.0, gt(0), "L [mm] (bilayer)", unit="mm"),
         **layer_keys(substrate=0.5, film=0.01),
+        "base": base_key(),
     }
 
     def validate(self, cfg: dict) -> None:
@@ -29,6 +31,9 @@ class Bilayer(GeometryKind):
             raise ConfigError("mesh.element_size",
                               f"= {mesh['element_size']:g} is too coarse; allowed: <= geometry.length/2 "
                               f"= {geo['length'] / 2:g}")
+        if geo["base"] == "clamped" and cfg["loading"]["kind"] == "compression":
+            raise ConfigError("geometry.base", "= 'clamped' holds the base's u_x, which the compression moves at "
+                              "the right edge; allowed with loading.kind = 'compression': 'rollers'")
 
     def estimate(self, cfg: dict) -> dict:
         from app.geometry.base import structured_size
@@ -69,7 +74,7 @@ class Bilayer(GeometryKind):
     @staticmethod
     def _setup(tm, geo: dict) -> GeometrySetup:
         return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},
-                             {"left": "roller_x", "right": "roller_x", "bottom": "roller_y", "top": "permeable"},
+                             {"left": "roller_x", "right": "roller_x", "bottom": base_role(geo), "top": "permeable"},
                              wrinkles="along", plot_band=6 * geo["film_thickness"],
                              drive=Drive("right", 0, geo["length"]))
 

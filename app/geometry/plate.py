@@ -1,13 +1,15 @@
 """Geometry kind ``plate``: the paper's film on a substrate in 3D, over a rectangle of length L (x) and width
 W (z), y up through substrate and film as in the 2D bilayer. The four sides are on rollers (u_x = 0 on
-x = 0, L; u_z = 0 on z = 0, W), the base on rollers (u_y = 0, as the 2D bilayer's), no flux except at the
+x = 0, L; u_z = 0 on z = 0, W), the base on rollers (u_y = 0, as the 2D bilayer's; or clamped, u = 0, with
+``geometry.base = "clamped"``), no flux except at the
 top, where fluid enters. Its every x-y section is the 2D bilayer's mesh (:mod:`meshes.plate`), so the plane-
 strain bilayer is the plate one element wide, and the exact 1D reduction of the bilayer's section is the
 plate's too, with a mode exp(i k.x) critical where |k| meets the 1D margin curve."""
 
 from __future__ import annotations
 
-from app.geometry.base import MEMORY_BASE_MB, MEMORY_PER_DOF_KB, GeometryKind, GeometrySetup, layer_keys
+from app.geometry.base import (MEMORY_BASE_MB, MEMORY_PER_DOF_KB, GeometryKind, GeometrySetup, base_key, base_role,
+                               layer_keys)
 from app.schema import ConfigError, gt, key
 
 
@@ -24,6 +26,7 @@ class Plate(GeometryKind):
         "length": key(float, 0.25, gt(0), "L [mm] along x (plate)", unit="mm"),
         "width": key(float, 0.25, gt(0), "W [mm] along z (plate; the film's other in-plane direction)", unit="mm"),
         **layer_keys(substrate=0.1, film=0.01),
+        "base": base_key(),
     }
 
     def validate(self, cfg: dict) -> None:
@@ -62,5 +65,5 @@ class Plate(GeometryKind):
                                mesh["substrate_grading"], film_grading=mesh["film_grading"], msh_path=msh_path)
         return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},
                              {"left": "roller_x", "right": "roller_x", "front": "roller_z", "back": "roller_z",
-                              "bottom": "roller_y", "top": "permeable"},
+                              "bottom": base_role(geo), "top": "permeable"},
                              wrinkles="plane", plot_band=6 * geo["film_thickness"])

@@ -47,7 +47,7 @@ class Stability:
         F0 = m.deformation(u)
         s0 = m.mat.s0 - m.div(q)
         self.tau = compat.Constant(m.domain, compat.ScalarType(tau or 1.0))
-        held = {1: sec.base} if sec.shape == "planar" else {0: sec.base, 1: sec.base}
+        held = {1: sec.base} if sec.shape == "planar" and not sec.clamped else {0: sec.base, 1: sec.base}
         if criterion == "rate":
             held[3 if sec.shape == "planar" else 2] = sec.base  # no normal flux through the held end
         self.op = ModeOperator(m.domain, sec.shape, m.res.degree, F0, s0, m.mat, criterion, tau=self.tau,

@@ -1,7 +1,8 @@
 """The cross-section of a laterally uniform bilayer or an axisymmetric tube: layers along one coordinate,
 where fluid enters, what is held, and the 1D mesh.
 
-Planar (``geometry.kind = "bilayer"``): Y from the substrate's base (Y = 0, roller: u_y = 0, no flux) to
+Planar (``geometry.kind = "bilayer"``): Y from the substrate's base (Y = 0, roller: u_y = 0, or clamped: u = 0;
+no flux) to
 the film's permeable surface (Y = H + w). The 3D plate (``"plate"``) has the same section: its laterally
 uniform state is the bilayer's, and a mode cos(m pi x / L) cos(n pi z / W) of its rollered rectangle reduces
 to the planar one at |k| = pi sqrt((m/L)^2 + (n/W)^2) (the in-plane polarized part; the antiplane part is a
@@ -57,6 +58,7 @@ class Section:
     film: str = "film"
     width: float | None = None  # the 3D plate's width W along z (its modes: the lattice of |k|, see lattice())
     axial: bool = False  # the 3D tube: mode n is its axially uniform mode, wave vector (n, 0)
+    clamped: bool = False  # planar: the base holds both displacement components (geometry.base = "clamped")
 
     @property
     def film_layer(self) -> Layer:
