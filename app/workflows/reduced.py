@@ -99,6 +99,9 @@ def compute(cfg: dict, stop=None) -> dict:
     curve = est.levels[0].curve
     early = sorted(curve.modes.values(), key=lambda c: c.time)[:ISOMODES]
     block["isomodes"] = [[c.wrinkles, 1e3 * c.growth] for c in early]
+    if section.width is not None or section.axial:  # 3D: each early mode's wave vectors, for the 3D run's order
+        block["mode_crossings"] = [{"wave_vectors": [list(w) for w in section.wave_vectors(c.n)],
+                                    "growth_um": 1e3 * c.growth, "time": c.time} for c in early]
     block["_estimate"] = est  # the caller's: margin curve and histories (removed before JSON)
     return block
 
@@ -151,7 +154,30 @@ def add_reduced(summary: dict, cfg: dict, comm) -> None:
     if block["kind"] == "interrupted":
         log.info("hydrobuckle: 1D reduction: interrupted; the 2D answer is kept")
         return
+    order = mode_order(summary)
+    if order is not None:
+        block["first_3d_mode"] = order
     log.info("hydrobuckle: " + describe(block) + compare(summary))
+
+
+def mode_order(summary: dict) -> dict | None:
+    """Where a 3D run's first mode stands in the 1D order, when it is not the 1D's first: its wave vector,
+    its 1D crossing (growth, and the gap to the 1D first) and whether that gap lies within the 3D error bar
+    (``within_error_bar``: then which of the two comes first is not resolved at the run's mesh; None without an
+    error bar). A 3D tube's mode with an axial
+    wave has no 1D counterpart (``"in_1d": False``). None for 2D runs and where the first modes agree."""
+    red, c = summary.get("reduced") or {}, summary.get("critical") or {}
+    modes, first_1d = c.get("modes") or [], red.get("wave_vectors")
+    wave = modes[0].get("wave_vector") if modes else None
+    if wave is None or not first_1d or list(wave) in first_1d or red.get("growth_um") is None:
+        return None
+    err = (c.get("discretization_error") or {}).get("total_um")
+    hit = next((m for m in red.get("mode_crossings") or [] if list(wave) in m["wave_vectors"]), None)
+    if hit is None:
+        return {"wave_vector": list(wave), "in_1d": False}
+    gap = hit["growth_um"] - red["growth_um"]
+    return {"wave_vector": list(wave), "in_1d": True, "growth_um": hit["growth_um"], "gap_um": gap,
+            "within_error_bar": (gap <= err) if err else None}
 
 
 def compare(summary: dict) -> str:
@@ -171,6 +197,21 @@ def compare(summary: dict) -> str:
         text += (f"; the exact 1D value lies outside the {dim} error bar: the {dim} mesh misses something its "
                  "companion runs do not show (a thick film's surface diffusion layer: try mesh.film_grading "
                  "or more mesh.film_layers; docs/reduction.md section 5)")
+    order = red.get("first_3d_mode") or mode_order(summary)
+    if order is not None:
+        wave = tuple(order["wave_vector"])
+        if not order["in_1d"]:
+            text += (f"; the 3D's first mode {wave} is not among the 1D's earliest"
+                     + (" (an axial wave, which the 1D reduction of axially uniform modes does not cover)"
+                        if red.get("wave_vectors") and all(w[1] == 0 for w in red["wave_vectors"]) and wave[1] else ""))
+        else:
+            text += (f"; the 3D's first mode {wave} crosses in 1D at {order['growth_um']:.4f} um, "
+                     f"{order['gap_um']:+.4f} um after the 1D's first: "
+                     + ("no error bar to judge it by (stability.error_estimate = false)"
+                        if order["within_error_bar"] is None else
+                        "within the 3D error bar, so which of the two comes first is not resolved at this mesh (a "
+                        "finer one tells)" if order["within_error_bar"] else
+                        "outside the 3D error bar, so the 3D mesh puts the wrong mode first (refine it)"))
     if red["kind"] == "surface" and c.get("wrinkle_count") is not None:
         text += ("; the 2D N_c is a finite wave after the surface's short-wave onset, which a mesh cannot "
                  "resolve (docs/reduction.md)")
