@@ -29,6 +29,12 @@ only = set(args)
 
 # (name, file, regex, replacement, tests that must fail)
 MUTATIONS = [
+    ("3D surface check: the wave along the frame's first axis only (no other directions of the surface)",
+     "app/reduced/halfspace.py", r"if F\.shape == \(2, 2\):", "if True:",
+     ["tests/test_surface_check.py::test_the_3d_half_space_is_the_plane_strain_one_for_a_wave_in_a_plane_of_the_state"]),
+    ("clamped base: the 1D modes held as on rollers (u_y only)", "app/reduced/onset.py",
+     r'sec\.shape == "planar" and not sec\.clamped', 'sec.shape == "planar"',
+     ["tests/test_clamped_base.py::test_the_clamped_and_the_rollered_base_each_meet_their_1d_answer"]),
     ("3D user mesh: a node inside another cell's face not looked for (hanging nodes pass)", "meshes/msh.py",
      r"hit = \(dist < tol\)", "hit = (dist < -1.0)",
      ["tests/test_msh3d.py::test_a_malformed_hexahedral_file_exits_2_naming_the_cell_or_group"]),
