@@ -157,8 +157,8 @@ def test_refinement_splits_every_cell_and_keeps_the_file_geometry(shared_tmp):
     assert dist.max() < 1e-12
 
 
-def test_refinements_key_is_for_msh_only(comm):
-    with pytest.raises(config.ConfigError, match=r"mesh.refinements.*'msh' only; allowed for 'bilayer': 0"):
+def test_refinements_key_is_for_the_msh_kinds_only(comm):
+    with pytest.raises(config.ConfigError, match=r"mesh.refinements.*'msh' and 'msh-3d' only; allowed for 'bilayer': 0"):
         config.resolve({"mesh": {"refinements": 1}})
     with pytest.raises(config.ConfigError, match=r"mesh.refinements.*allowed: in \[0, 4\]"):
         config.resolve({"geometry": {"kind": "msh", "file": "x.msh", "layers": {"film": "film"},
