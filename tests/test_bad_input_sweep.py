@@ -30,7 +30,8 @@ COMPANIONS = {
     # splitting a file's cells applies to the msh kind only
     ("mesh.refinements", 4): {"geometry": {"kind": "msh", **MSH_BASE}},
     # a/b = 10 at the same area needs a passage of radius < R/sqrt(10): a thick substrate
-    ("geometry.aspect_ratio", 10.0): {"geometry": {"substrate_thickness": 0.7, "film_thickness": 0.02}},
+    ("geometry.aspect_ratio", 10.0): {"geometry": {"outer_radius": 1.0, "substrate_thickness": 0.7,
+                                                   "film_thickness": 0.02}},
 }
 
 

@@ -11,7 +11,8 @@ from app.schema import ConfigError, gt, key
 
 
 def test_every_registered_kind_is_in_the_schema_with_its_defaults():
-    assert config.GEOMETRY_KINDS == geometry.KINDS.names() == ("bilayer", "tube", "elliptic-tube", "plate", "tube-3d", "msh",
+    assert config.GEOMETRY_KINDS == geometry.KINDS.names() == ("bilayer", "tube", "elliptic-tube", "plate", "tube-3d",
+                                                                         "elliptic-tube-3d", "msh",
                                                                          "msh-3d")
     table = config.SCHEMA["geometry"]
     assert table["kind"].default == geometry.DEFAULT_KIND

@@ -20,9 +20,9 @@ from app.geometry.bilayer import Bilayer
 from app.geometry.msh import UserMsh, UserMsh3D
 from app.geometry.plate import Plate
 from app.geometry.tube import EllipticTube, Tube
-from app.geometry.tube3d import Tube3D
+from app.geometry.tube3d import EllipticTube3D, Tube3D
 
-BUILTIN = (Bilayer(), Tube(), EllipticTube(), Plate(), Tube3D(), UserMsh(), UserMsh3D())  # registration order = the order docs list them
+BUILTIN = (Bilayer(), Tube(), EllipticTube(), Plate(), Tube3D(), EllipticTube3D(), UserMsh(), UserMsh3D())  # registration order = the order docs list them
 for _kind in BUILTIN:
     KINDS.register(_kind)
 DEFAULT_KIND = "bilayer"  # the paper's film on a substrate

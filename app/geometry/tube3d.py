@@ -8,7 +8,7 @@ run's answer (each critical mode's (n around, m along the axis) is reported)."""
 from __future__ import annotations
 
 from app.geometry.base import MEMORY_BASE_MB, MEMORY_PER_DOF_KB, GeometrySetup, layer_keys
-from app.geometry.tube import Tube
+from app.geometry.tube import EllipticTube, Tube
 from app.schema import ConfigError, gt, in_closed, key
 
 
@@ -52,10 +52,31 @@ class Tube3D(Tube):
         try:
             tm = mesh_from_builder(comm, "tube-3d", tube3d.add_model, geo["outer_radius"], geo["substrate_thickness"],
                                    geo["film_thickness"], mesh["element_size"], mesh["film_layers"],
-                                   mesh["substrate_grading"], geo["length"], film_grading=mesh["film_grading"],
+                                   mesh["substrate_grading"], geo["length"], aspect_ratio=self.aspect_ratio(geo),
+                                   film_grading=mesh["film_grading"],
                                    axial_elements=self.axial_elements(cfg), msh_path=msh_path)
         except GeometryError as err:
             raise ConfigError(err.key, str(err)) from None
         return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},
                              {"inner": "permeable", "outer": "fixed", "front": "roller_z", "back": "roller_z"},
                              growth="mean_radial", wrinkles="cylinder")
+
+
+class EllipticTube3D(Tube3D):
+    """``elliptic-tube-3d``: the 3D tube with the elliptic passage of ``elliptic-tube`` (a/b = aspect_ratio, a b =
+    r^2, semi-minor axis b along x). Growth is the inward displacement of the minor-axis vertex line (b, 0, z),
+    averaged along the axis: the paper's g_c,x. No exact 1D reduction (the passage is not axisymmetric); one
+    element long it is the 2D elliptic tube."""
+
+    name = "elliptic-tube-3d"
+    keys = {**Tube3D.keys, "aspect_ratio": EllipticTube.keys["aspect_ratio"]}
+
+    def aspect_ratio(self, geo: dict) -> float:
+        return geo["aspect_ratio"]
+
+    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+        setup = super().build(cfg, comm, msh_path)
+        setup.growth = "vertex"
+        setup.growth_point = (setup.tm.info["semi_minor"], 0.0)
+        setup.growth_direction = (-1.0, 0.0)
+        return setup

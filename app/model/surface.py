@@ -341,11 +341,20 @@ class CylinderSurface(SurfaceShape):
 
     @staticmethod
     def _project(coords: np.ndarray, disp: np.ndarray):
+        """(the nodes' (phase around, z), radial displacement, the section's perimeter / 2 pi). The phase is the
+        arc length around the passage's section (the same on every ring) scaled to 2 pi, as the 2D tube's
+        (:func:`around_profile`), from the angle of the first node: on a circle it is the angle itself, on an
+        elliptic passage its waves are counted as in 2D."""
         rel = coords[:, :2]
         radius = np.linalg.norm(rel, axis=1)
         theta = np.mod(np.arctan2(rel[:, 1], rel[:, 0]), 2 * np.pi)
         theta[theta > 2 * np.pi - 1e-9] = 0.0  # a node at theta = 0 one roundoff below the x axis
-        return np.column_stack([theta, coords[:, 2]]), np.sum(disp[:, :2] * rel, axis=1) / radius, radius
+        _, first, inverse = np.unique(np.round(theta, 9), return_index=True, return_inverse=True)
+        section = rel[first]  # one node per angle, in increasing angle
+        seg = np.linalg.norm(np.roll(section, -1, axis=0) - section, axis=1)  # the closing chord included
+        phase = theta[first[0]] + 2 * np.pi * np.concatenate([[0.0], np.cumsum(seg[:-1])]) / seg.sum()
+        scale = np.full(len(coords), seg.sum() / (2 * np.pi))
+        return np.column_stack([phase[inverse.ravel()], coords[:, 2]]), np.sum(disp[:, :2] * rel, axis=1) / radius, scale
 
     def order(self, coords: np.ndarray) -> np.ndarray:
         position, _, _ = self._project(coords, np.zeros_like(coords))
@@ -481,8 +490,9 @@ class MeanRadial(GrowthMeasure):
 
 
 class AtVertex(GrowthMeasure):
-    """The inward displacement of one node (``GeometrySetup.growth_point`` along ``growth_direction``): the
-    elliptic passage's minor-axis vertex."""
+    """The inward displacement of one surface point (``GeometrySetup.growth_point`` along ``growth_direction``):
+    the elliptic passage's minor-axis vertex. In 3D the point is a line along the axis z (every node at that
+    (x, y)), and its nodes' inward displacements are averaged along z (trapezoid), as the 3D tube's rings are."""
 
     name = "vertex"
 
@@ -490,18 +500,25 @@ class AtVertex(GrowthMeasure):
         from mpi4py import MPI
 
         geo, comm = problem.geo, problem.comm
-        X = problem.V_u.tabulate_dof_coordinates()[:, :2]
+        gdim = problem.domain.geometry.dim
+        X = problem.V_u.tabulate_dof_coordinates()[:, :gdim]
         n_owned = problem.V_u.dofmap.index_map.size_local
-        d = np.linalg.norm(X[:n_owned] - np.asarray(geo.growth_point), axis=1)
-        i = int(np.argmin(d)) if n_owned else -1
-        best = comm.allreduce(float(d[i]) if n_owned else np.inf, op=MPI.MIN)
+        d = np.linalg.norm(X[:n_owned, :2] - np.asarray(geo.growth_point), axis=1)
+        best = comm.allreduce(float(d.min()) if n_owned else np.inf, op=MPI.MIN)
         if best > 1e-8:
             raise RuntimeError(f"no mesh node at the growth point {geo.growth_point} (nearest {best:.3g} mm away)")
-        dofs = problem.u_dofs[[2 * i, 2 * i + 1]] if n_owned and d[i] == best else None  # (u_x, u_y) in W
+        rows = np.flatnonzero(d <= max(best, 1e-12) * (1 + 1e-9) + 1e-12) if n_owned else np.zeros(0, dtype=int)
+        dofs = problem.u_dofs[gdim * rows[:, None] + np.array([0, 1])]  # (nodes, (u_x, u_y)) in W
+        z = X[rows, 2] if gdim == 3 else np.zeros(len(rows))
 
         def growth() -> float:
-            local = float(np.dot(problem.state.x.array[dofs], geo.growth_direction)) if dofs is not None else 0.0
-            return comm.allreduce(local)
+            local = problem.state.x.array[dofs] @ np.asarray(geo.growth_direction) if len(rows) else np.zeros(0)
+            zs, values = map(np.concatenate, zip(*comm.allgather((z, local))))
+            if len(zs) == 1:
+                return float(values[0])
+            order = np.argsort(zs)
+            zs, values = zs[order], values[order]
+            return float(np.sum(0.5 * (values[1:] + values[:-1]) * np.diff(zs)) / (zs[-1] - zs[0]))
 
         return growth
 
