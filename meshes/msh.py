@@ -299,12 +299,15 @@ def _check_conforming_3d(etags, enodes, groups, xyz, tol, named: set[int] = froz
                 continue
             r = Q - A
             dist = np.abs(r @ nrm) / area2
+            # a node of a curved interface meshed separately lies on the curve, a sag ~ h^2 / 8R off the face's
+            # chord plane: within a hundredth of the face's size counts as on it
+            near = max(tol, 1e-2 * float(np.linalg.norm(P[2] - P[0])))
             # barycentric coordinates in the triangle's plane
             g = np.array([[e1 @ e1, e1 @ e2], [e1 @ e2, e2 @ e2]])
             lam = np.linalg.solve(g, np.stack([r @ e1, r @ e2]))
             eps = 1e-9
             corner = np.linalg.norm(Q[:, None, :] - P[None], axis=2).min(axis=1) <= tol  # a slit's other face
-            hit = (dist < tol) & (lam[0] > -eps) & (lam[1] > -eps) & (lam.sum(axis=0) < 1 + eps) & ~corner
+            hit = (dist < near) & (lam[0] > -eps) & (lam[1] > -eps) & (lam.sum(axis=0) < 1 + eps) & ~corner
             if hit.any():
                 n = int(cand[np.argmax(hit)])
                 other = node_cell[n]

@@ -36,7 +36,7 @@ MUTATIONS = [
      r'sec\.shape == "planar" and not sec\.clamped', 'sec.shape == "planar"',
      ["tests/test_clamped_base.py::test_the_clamped_and_the_rollered_base_each_meet_their_1d_answer"]),
     ("3D user mesh: a node inside another cell's face not looked for (hanging nodes pass)", "meshes/msh.py",
-     r"hit = \(dist < tol\)", "hit = (dist < -1.0)",
+     r"hit = \(dist < near\)", "hit = (dist < -1.0)",
      ["tests/test_msh3d.py::test_a_malformed_hexahedral_file_exits_2_naming_the_cell_or_group"]),
     ("3D user mesh: a passage's growth as the mean normal displacement (not the rings' radial mean)",
      "app/geometry/msh.py", r'growth="mean_radial" if shape == "cylinder"', 'growth="mean_normal" if shape == "cylinder"',

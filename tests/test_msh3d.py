@@ -8,10 +8,11 @@
 - Malformed hexahedral files exit 2 with one line naming the cell, group or key, and create no result
   directory: tetrahedra, a left-handed cell among right-handed ones, a cell turned inside out, a hanging node,
   unjoined blocks, a 2D file given as 3D and the reverse, a permeable surface that is not a tensor grid, or
-  neither flat nor a cylinder about z."""
+  neither flat nor a cylinder about z, or a cylinder that does not go all the way around (a quarter tube)."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from conftest import read_csv
 from mpi4py import MPI
@@ -146,7 +147,24 @@ CASES = {  # name: (file, [words of the one-line error])
     "2d-file": (bilayer, ["is not a 3D mesh", "'msh'"]),
     "not-a-grid": (lambda: _box(moved={(1, 1, 2): (0.6, 0.5, 1.0)}), ["geometry.file", "not a tensor grid"]),
     "curved": (lambda: _box(moved={(1, 1, 2): (0.5, 0.5, 1.1)}), ["geometry.surface", "neither flat"]),
+    "quarter-tube": (lambda: _quarter_tube(), ["geometry.surface", "does not go all the way around"]),
 }
+
+
+def _quarter_tube() -> Hexes:
+    """A quarter of a tube's wall (r 1..1.2, 0..90 degrees, z 0..0.2): its passage r = 1 is a partial cylinder."""
+    import math
+
+    w = Hexes()
+    nt, nr = 4, 1
+    pos = {(i, j, k): (r * math.cos(t), r * math.sin(t), 0.1 * k)
+           for i, t in enumerate(np.linspace(0, math.pi / 2, nt + 1)) for j, r in enumerate((1.0, 1.2))
+           for k in range(3)}
+    node = w.block("gel", (0, 0, 0), (1, 1, 1), (nt, nr, 2), moved=pos)
+    w.cells["top"] = (2, QUAD, [[node(i, 0, k), node(i + 1, 0, k), node(i + 1, 0, k + 1), node(i, 0, k + 1)]
+                                for i in range(nt) for k in range(2)])
+    w.face_group("base", node, ((0, nt), (0, nr)), 0)
+    return w
 
 
 def _run_exits_2(tmp, text: str, capsys) -> str:

@@ -153,7 +153,8 @@ def test_the_3d_surface_state_is_the_2d_one_with_the_third_stretch_and_in_equili
 
 
 def test_the_3d_half_space_is_the_plane_strain_one_for_a_wave_in_a_plane_of_the_state():
-    """A state F = diag(F_2D, 1) (the t2 stretch 1) with the wave along t1 is the plane-strain half-space: the
+    """A state with F_2D in its (t1, n) block and 1 at t2 (F t2 = t2), the wave along t1, is the plane-strain
+    half-space: the
     margins agree to roundoff (measured 1e-13); the margin over the wave's directions does not depend on how
     the frame is turned about the normal (the law is isotropic; to the scaling, below), and a state compressed along t2 only is
     unstable in 3D where the 2D check, which sees waves along t1 only, is not. (The margin is the smallest

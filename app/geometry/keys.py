@@ -13,7 +13,7 @@ MESH: dict[str, Key] = {
     "film_grading": key(float, 1.0, in_closed(1.0, 4.0),
                         "film element-height ratio towards the permeable surface; 1 = uniform"),
     "refinements": key(int, 0, in_closed(0, 4),
-                       "geometry.kind = 'msh' only: split every quadrilateral of the file into 4 this many "
-                       "times (gmsh's uniform refinement; physical groups kept, new nodes on the file's "
-                       "straight edges)"),
+                       "geometry.kind = 'msh' and 'msh-3d' only: split every cell of the file into 4 "
+                       "(quadrilaterals) or 8 (hexahedra) this many times (gmsh's uniform refinement; physical "
+                       "groups kept, new nodes on the file's straight edges)"),
 }

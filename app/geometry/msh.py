@@ -37,7 +37,7 @@ class UserMsh(GeometryKind):
     def validate(self, cfg: dict) -> None:
         geo = cfg["geometry"]
         if not geo.get("file"):
-            raise ConfigError("geometry.file", "must name a .msh file for geometry.kind = 'msh'")
+            raise ConfigError("geometry.file", f"must name a .msh file for geometry.kind = '{self.name}'")
         layers, boundaries = geo.get("layers"), geo.get("boundaries")
         if not layers:
             raise ConfigError("geometry.layers", "must map cell physical groups to materials, e.g. "
@@ -144,6 +144,9 @@ def surface_shape_of(xyz, asked: str, path) -> str:
     geometry.surface (or geometry.file) otherwise."""
     import numpy as np
 
+    if len(xyz) == 0:
+        raise ConfigError("geometry.boundaries", f"the 'permeable' group(s) of '{path}' have no surface elements: "
+                          "fluid enters nowhere; name a facet group with elements")
     size = float(np.ptp(xyz, axis=0).max()) or 1.0
     flat = float(np.ptp(xyz, axis=0).min()) <= 1e-9 * size
     radius = np.linalg.norm(xyz[:, :2], axis=1)
@@ -161,6 +164,12 @@ def surface_shape_of(xyz, asked: str, path) -> str:
         a, b = np.mod(np.arctan2(xyz[:, 1], xyz[:, 0]), 2 * np.pi), xyz[:, 2]
         a[a > 2 * np.pi - 1e-9] = 0.0
         digits = (9, 12)
+        angles = np.unique(np.round(a, 9))
+        gaps = np.diff(np.concatenate([angles, [angles[0] + 2 * np.pi]]))
+        if len(angles) < 3 or gaps.max() > 1.5 * np.median(gaps):  # the passage's modes wrap around 2 pi
+            raise ConfigError("geometry.surface", f"= {asked!r}: the permeable surface of '{path}' does not go all "
+                              f"the way around the z axis (a gap of {np.degrees(gaps.max()):.3g} degrees); a "
+                              "cylinder's modes are waves around the whole passage: mesh the whole tube")
     if len(np.unique(np.round(a, digits[0]))) * len(np.unique(np.round(b, digits[1]))) != len(xyz):
         raise ConfigError("geometry.file", f"= '{path}': the nodes of its permeable surface are not a tensor grid "
                           f"of the surface's two coordinates ({shape}); 3D modes are described on such a grid: mesh "

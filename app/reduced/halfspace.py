@@ -22,8 +22,9 @@ W1 cos x + W2 sin x along t2, and the gradient's middle column (along t2) is zer
 A surface state F (3x3 in the frame) is stable at short waves when this operator is definite for every
 direction of the wave in the surface: each direction phi is the state seen in a frame turned by phi about the
 normal, F Q(phi). :meth:`HalfSpace.directions` samples phi from the principal directions of the surface's
-stretch (where the extremes of a state that is uniform in the plane lie) in steps of pi / 8; a state
-F = diag(F_2D, 1) with the wave along t1 is the plane-strain half-space exactly.
+stretch (where the extremes of a state that is uniform in the plane lie) in steps of pi / 8; a state with
+F_2D in its (t1, n) block and 1 at t2 (F t2 = t2), with the wave along t1, is the plane-strain half-space
+exactly.
 """
 
 from __future__ import annotations

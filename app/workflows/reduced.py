@@ -175,7 +175,7 @@ def mode_order(summary: dict) -> dict | None:
     hit = next((m for m in red.get("mode_crossings") or [] if list(wave) in m["wave_vectors"]), None)
     if hit is None:
         return {"wave_vector": list(wave), "in_1d": False}
-    gap = hit["growth_um"] - red["growth_um"]
+    gap = hit["growth_um"] - red["mode_crossings"][0]["growth_um"]  # both on the 1D base level (the same mesh)
     return {"wave_vector": list(wave), "in_1d": True, "growth_um": hit["growth_um"], "gap_um": gap,
             "within_error_bar": (gap <= err) if err else None}
 
