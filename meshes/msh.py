@@ -99,7 +99,67 @@ def _cells(cell_groups: dict[str, int], dim: int = 2):
 
 
 def _at(p) -> str:
-    return f"({p[0]:.6g}, {p[1]:.6g})"
+    """A point as text, (x, y) or (x, y, z)."""
+    return "(" + ", ".join(f"{v:.6g}" for v in p) + ")"
+
+
+def _corner_signs(jac, pts, etags, groups, eps: float, distorted: str, sense: tuple[str, str]) -> str | None:
+    """The sentence for the first cell whose corner Jacobians ``jac`` (cells x corners, at the corners ``pts``)
+    are not all of one sign beyond ``eps`` (degenerate or ``distorted``), or that has the other sign than most
+    (inverted: its nodes ``sense[0]`` where they are negative, else ``sense[1]``); None if every cell is fine."""
+    pos, neg = (jac > eps).all(axis=1), (jac < -eps).all(axis=1)
+    bad = ~(pos | neg)
+    if bad.any():
+        i = int(np.argmax(bad))
+        k = int(np.argmin(jac[i] * (1 if pos.sum() >= neg.sum() else -1)))
+        return (f"has a degenerate or {distorted} cell {etags[i]} in group {groups[i]!r} (negative or zero "
+                f"Jacobian at its corner {_at(pts[i, k])}); fix or remesh that cell")
+    flipped = neg if pos.sum() >= neg.sum() else pos
+    if flipped.any():
+        i = int(np.argmax(flipped))
+        return (f"has {int(flipped.sum())} inverted cell(s), e.g. cell {etags[i]} in group {groups[i]!r} "
+                f"(centre {_at(pts[i].mean(axis=0))}): its nodes {sense[0] if neg[i] else sense[1]} unlike the "
+                f"other {int(len(etags) - flipped.sum())} (negative Jacobian); reorient it "
+                "(gmsh: Mesh > Reverse, or gmsh.model.mesh.reverse)")
+    return None
+
+
+def _hanging(n: int, c: int, where: str, xyz, etags, groups, node_cell) -> str:
+    """The sentence for node ``n`` lying inside ``where`` (an edge, a face) of cell ``c`` without being its node."""
+    other = node_cell[n]
+    return (f"is not conforming: node {n} at {_at(xyz[n])} (cell {etags[other]}, group {groups[other]!r}) lies "
+            f"inside {where} of cell {etags[c]} (group {groups[c]!r}) without being one of its nodes (a hanging "
+            "node: the groups were meshed separately); mesh them together so they share the nodes of their "
+            "interface")
+
+
+def _boundary(facets, owner, enodes):
+    """(the facets (edges or faces, as node tags) that one cell has alone, their cells, the nodes on them, node
+    tag -> the first cell that has it) of cells ``enodes`` whose facets are ``facets`` owned by ``owner``."""
+    _, inverse, counts = np.unique(np.sort(facets, axis=1), axis=0, return_inverse=True, return_counts=True)
+    once = counts[inverse.ravel()] == 1
+    node_cell: dict[int, int] = {}
+    for c, row in enumerate(enodes):
+        for n in row:
+            node_cell.setdefault(int(n), c)
+    return facets[once], owner[once], np.unique(facets[once]), node_cell
+
+
+def _unjoined(bnodes, xyz, tol, named, etags, groups, node_cell) -> str | None:
+    """The sentence for two distinct boundary nodes at one point (groups meshed separately, not joined) that do
+    not all lie on named facet groups (a slit's two faces), or None."""
+    key = np.round(xyz[bnodes] / tol).astype(np.int64)
+    _, first, cnt = np.unique(key, axis=0, return_index=True, return_counts=True)
+    for j in first[cnt > 1]:
+        same = bnodes[(key == key[j]).all(axis=1)]
+        if all(int(n) in named for n in same):  # a slit: both faces are named boundaries
+            continue
+        cells = [node_cell[int(n)] for n in same[:2]]
+        return (f"is not conforming: nodes {int(same[0])} and {int(same[1])} are distinct but both at "
+                f"{_at(xyz[same[0]])} (cells {etags[cells[0]]} and {etags[cells[1]]}, groups "
+                f"{groups[cells[0]]!r} and {groups[cells[1]]!r}): the cells there are not joined; mesh the "
+                "groups together (or remove duplicate nodes, gmsh: Coherence Mesh)")
+    return None
 
 
 def check_cells(cell_groups: dict[str, int], facet_groups: dict[str, int] | None = None) -> str | None:
@@ -126,20 +186,10 @@ def check_cells(cell_groups: dict[str, int], facet_groups: dict[str, int] | None
     for k in range(4):
         e1, e2 = xy[:, (k + 1) % 4] - xy[:, k], xy[:, (k - 1) % 4] - xy[:, k]
         cross[:, k] = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    pos, neg = (cross > tol * tol).all(axis=1), (cross < -tol * tol).all(axis=1)
-    bad = ~(pos | neg)
-    if bad.any():
-        i = int(np.argmax(bad))
-        k = int(np.argmin(cross[i] * (1 if pos.sum() >= neg.sum() else -1)))
-        return (f"has a degenerate or non-convex cell {etags[i]} in group {groups[i]!r} (negative or zero "
-                f"Jacobian at its corner {_at(xy[i, k])}); fix or remesh that cell")
-    flipped = neg if pos.sum() >= neg.sum() else pos
-    if flipped.any():
-        i = int(np.argmax(flipped))
-        return (f"has {int(flipped.sum())} inverted cell(s), e.g. cell {etags[i]} in group {groups[i]!r} "
-                f"(centre {_at(xy[i].mean(axis=0))}): its nodes run {'clockwise' if neg[i] else 'counter-clockwise'}"
-                f" unlike the other {int(len(etags) - flipped.sum())} (negative Jacobian); reorient it "
-                "(gmsh: Mesh > Reverse, or gmsh.model.mesh.reverse)")
+    sense = ("run clockwise", "run counter-clockwise")
+    bad = _corner_signs(cross, xy, etags, groups, tol * tol, "non-convex", sense)
+    if bad:
+        return bad
     return _check_conforming(etags, enodes, groups, xyz[:, :2], tol, _facet_group_nodes(facet_groups or {}))
 
 
@@ -157,14 +207,7 @@ def _facet_group_nodes(facet_groups: dict[str, int], dim: int = 1) -> set[int]:
 def _check_conforming(etags, enodes, groups, xy, tol, named: set[int] = frozenset()) -> str | None:
     edges = np.sort(np.stack([enodes, np.roll(enodes, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
     owner = np.repeat(np.arange(len(etags)), 4)
-    uniq, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
-    once = counts[inverse.ravel()] == 1
-    bedges, bowner = edges[once], owner[once]
-    bnodes = np.unique(bedges)
-    node_cell = {}
-    for c, row in enumerate(enodes):
-        for n in row:
-            node_cell.setdefault(int(n), c)
+    bedges, bowner, bnodes, node_cell = _boundary(edges, owner, enodes)
     # a boundary node strictly inside a boundary edge: a hanging node
     order = np.argsort(xy[bnodes, 0])
     sx, sn = xy[bnodes[order], 0], bnodes[order]
@@ -181,25 +224,8 @@ def _check_conforming(etags, enodes, groups, xy, tol, named: set[int] = frozense
         dist = np.abs(q[:, 0] * d[1] - q[:, 1] * d[0]) / np.sqrt(length2)
         hit = (t > 1e-9) & (t < 1 - 1e-9) & (dist < tol + 1e-9 * np.sqrt(length2))
         if hit.any():
-            n = int(cand[np.argmax(hit)])
-            other = node_cell[n]
-            return (f"is not conforming: node {n} at {_at(xy[n])} (cell {etags[other]}, group "
-                    f"{groups[other]!r}) lies inside an edge of cell {etags[c]} (group {groups[c]!r}) without "
-                    "being one of its nodes (a hanging node: the groups were meshed separately); mesh them "
-                    "together so they share the nodes of their interface")
-    # two distinct boundary nodes at one point: groups meshed separately, not joined
-    key = np.round(xy[bnodes] / tol).astype(np.int64)
-    _, first, cnt = np.unique(key, axis=0, return_index=True, return_counts=True)
-    for j in first[cnt > 1]:
-        same = bnodes[(key == key[j]).all(axis=1)]
-        if all(int(n) in named for n in same):  # a slit: both faces are named boundaries
-            continue
-        cells = [node_cell[int(n)] for n in same[:2]]
-        return (f"is not conforming: nodes {int(same[0])} and {int(same[1])} are distinct but both at "
-                f"{_at(xy[same[0]])} (cells {etags[cells[0]]} and {etags[cells[1]]}, groups "
-                f"{groups[cells[0]]!r} and {groups[cells[1]]!r}): the cells there are not joined; mesh the "
-                "groups together (or remove duplicate nodes, gmsh: Coherence Mesh)")
-    return None
+            return _hanging(int(cand[np.argmax(hit)]), c, "an edge", xy, etags, groups, node_cell)
+    return _unjoined(bnodes, xy, tol, named, etags, groups, node_cell)
 
 
 def facet_group_coordinates(facet_groups: dict[str, int], names, dim: int = 2) -> np.ndarray:
@@ -228,10 +254,6 @@ def physical_names(dim: int = 2) -> tuple[dict[str, int], dict[str, int]]:
     return cells, facets
 
 
-def _at3(p) -> str:
-    return f"({p[0]:.6g}, {p[1]:.6g}, {p[2]:.6g})"
-
-
 def check_hexahedra(cell_groups: dict[str, int], facet_groups: dict[str, int] | None = None) -> str | None:
     """The 3D counterpart of :func:`check_cells`: a sentence naming the first unusable hexahedron, or None.
     Degenerate or badly distorted cells (the Jacobian of some corner, the triple product of its three edges, of
@@ -248,34 +270,16 @@ def check_hexahedra(cell_groups: dict[str, int], facet_groups: dict[str, int] | 
     jac = np.empty((len(etags), 8))
     for k, (c, a, b, d) in enumerate(HEX_CORNERS):
         jac[:, k] = np.einsum("ij,ij->i", np.cross(pts[:, a] - pts[:, c], pts[:, b] - pts[:, c]), pts[:, d] - pts[:, c])
-    pos, neg = (jac > tol ** 3).all(axis=1), (jac < -tol ** 3).all(axis=1)
-    bad = ~(pos | neg)
-    if bad.any():
-        i = int(np.argmax(bad))
-        k = int(np.argmin(jac[i] * (1 if pos.sum() >= neg.sum() else -1)))
-        return (f"has a degenerate or badly distorted cell {etags[i]} in group {groups[i]!r} (negative or zero "
-                f"Jacobian at its corner {_at3(pts[i, k])}); fix or remesh that cell")
-    flipped = neg if pos.sum() >= neg.sum() else pos
-    if flipped.any():
-        i = int(np.argmax(flipped))
-        return (f"has {int(flipped.sum())} inverted cell(s), e.g. cell {etags[i]} in group {groups[i]!r} "
-                f"(centre {_at3(pts[i].mean(axis=0))}): its nodes are {'left' if neg[i] else 'right'}-handed unlike "
-                f"the other {int(len(etags) - flipped.sum())} (negative Jacobian); reorient it "
-                "(gmsh: Mesh > Reverse, or gmsh.model.mesh.reverse)")
+    bad = _corner_signs(jac, pts, etags, groups, tol ** 3, "badly distorted", ("are left-handed", "are right-handed"))
+    if bad:
+        return bad
     return _check_conforming_3d(etags, enodes, groups, xyz, tol, _facet_group_nodes(facet_groups or {}, dim=2))
 
 
 def _check_conforming_3d(etags, enodes, groups, xyz, tol, named: set[int] = frozenset()) -> str | None:
     faces = np.stack([enodes[:, list(f)] for f in HEX_FACES], axis=1).reshape(-1, 4)  # (6 n, 4) in cycle order
     owner = np.repeat(np.arange(len(etags)), 6)
-    _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
-    once = counts[inverse.ravel()] == 1
-    bfaces, bowner = faces[once], owner[once]
-    bnodes = np.unique(bfaces)
-    node_cell = {}
-    for c, row in enumerate(enodes):
-        for n in row:
-            node_cell.setdefault(int(n), c)
+    bfaces, bowner, bnodes, node_cell = _boundary(faces, owner, enodes)
     # a boundary node inside a boundary face (not one of its corners): a hanging node. Each face is split
     # into two triangles through its diagonal; a node within tol of a triangle's plane and inside it hits.
     order = np.argsort(xyz[bnodes, 0])
@@ -309,21 +313,5 @@ def _check_conforming_3d(etags, enodes, groups, xyz, tol, named: set[int] = froz
             corner = np.linalg.norm(Q[:, None, :] - P[None], axis=2).min(axis=1) <= tol  # a slit's other face
             hit = (dist < near) & (lam[0] > -eps) & (lam[1] > -eps) & (lam.sum(axis=0) < 1 + eps) & ~corner
             if hit.any():
-                n = int(cand[np.argmax(hit)])
-                other = node_cell[n]
-                return (f"is not conforming: node {n} at {_at3(xyz[n])} (cell {etags[other]}, group "
-                        f"{groups[other]!r}) lies inside a face of cell {etags[c]} (group {groups[c]!r}) without "
-                        "being one of its nodes (a hanging node: the groups were meshed separately); mesh them "
-                        "together so they share the nodes of their interface")
-    key = np.round(xyz[bnodes] / tol).astype(np.int64)
-    _, first, cnt = np.unique(key, axis=0, return_index=True, return_counts=True)
-    for j in first[cnt > 1]:
-        same = bnodes[(key == key[j]).all(axis=1)]
-        if all(int(n) in named for n in same):  # a slit: both faces are named boundaries
-            continue
-        cells = [node_cell[int(n)] for n in same[:2]]
-        return (f"is not conforming: nodes {int(same[0])} and {int(same[1])} are distinct but both at "
-                f"{_at3(xyz[same[0]])} (cells {etags[cells[0]]} and {etags[cells[1]]}, groups "
-                f"{groups[cells[0]]!r} and {groups[cells[1]]!r}): the cells there are not joined; mesh the "
-                "groups together (or remove duplicate nodes, gmsh: Coherence Mesh)")
-    return None
+                return _hanging(int(cand[np.argmax(hit)]), c, "a face", xyz, etags, groups, node_cell)
+    return _unjoined(bnodes, xyz, tol, named, etags, groups, node_cell)

@@ -17,6 +17,7 @@ import pytest
 from conftest import read_csv
 from mpi4py import MPI
 from test_msh_malformed import HEX, QUAD, Writer, bilayer
+from test_msh_malformed import _run_exits_2 as run_exits_2
 
 from app import cli, config
 from app.workflows.run import simulate
@@ -168,20 +169,12 @@ def _quarter_tube() -> Hexes:
 
 
 def _run_exits_2(tmp, text: str, capsys) -> str:
-    comm = MPI.COMM_WORLD
-    path, out = tmp / "c.toml", tmp / "out"
-    if comm.rank == 0:
+    """The config ``text`` run: exit 2, one line on rank 0, no result directory (the 2D files' check)."""
+    path = tmp / "c.toml"
+    if MPI.COMM_WORLD.rank == 0:
         path.write_text(text)
-    comm.barrier()
-    assert cli.main(["run", str(path), "-o", str(out)]) == 2
-    err = capsys.readouterr().err
-    if comm.rank == 0:
-        assert len(err.splitlines()) == 1, err
-    else:
-        assert err == ""
-    comm.barrier()
-    assert not out.exists()
-    return comm.bcast(err, root=0)
+    MPI.COMM_WORLD.barrier()
+    return run_exits_2(tmp, path, capsys)
 
 
 @pytest.mark.parametrize("case", list(CASES))

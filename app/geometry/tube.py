@@ -87,11 +87,16 @@ class EllipticTube(Tube):
         return geo["aspect_ratio"]
 
     def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
-        setup = super().build(cfg, comm, msh_path)
-        setup.growth = "vertex"
-        setup.growth_point = (setup.tm.info["semi_minor"], 0.0)
-        setup.growth_direction = (-1.0, 0.0)
-        return setup
+        return grown_at_minor_vertex(super().build(cfg, comm, msh_path))
+
+
+def grown_at_minor_vertex(setup: GeometrySetup) -> GeometrySetup:
+    """An elliptic passage's growth: the inward displacement of its minor-axis vertex (b, 0) (in 3D the vertex
+    line along the axis), the paper's g_c,x."""
+    setup.growth = "vertex"
+    setup.growth_point = (setup.tm.info["semi_minor"], 0.0)
+    setup.growth_direction = (-1.0, 0.0)
+    return setup
 
 
 def tagged_mesh(comm, outer_radius: float, substrate_thickness: float, film_thickness: float, element_size: float,

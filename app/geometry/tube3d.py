@@ -8,7 +8,7 @@ run's answer (each critical mode's (n around, m along the axis) is reported)."""
 from __future__ import annotations
 
 from app.geometry.base import MEMORY_BASE_MB, MEMORY_PER_DOF_KB, GeometrySetup, layer_keys
-from app.geometry.tube import EllipticTube, Tube
+from app.geometry.tube import EllipticTube, Tube, grown_at_minor_vertex
 from app.schema import ConfigError, gt, in_closed, key
 
 
@@ -75,8 +75,4 @@ class EllipticTube3D(Tube3D):
         return geo["aspect_ratio"]
 
     def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
-        setup = super().build(cfg, comm, msh_path)
-        setup.growth = "vertex"
-        setup.growth_point = (setup.tm.info["semi_minor"], 0.0)
-        setup.growth_direction = (-1.0, 0.0)
-        return setup
+        return grown_at_minor_vertex(super().build(cfg, comm, msh_path))
