@@ -200,13 +200,13 @@ def test_a_3d_tube_one_element_long_reports_the_2d_tube_surface_onset(shared_tmp
     """The homogeneous tube above as a 3D tube one element long: the same passage state, and a wave along the
     axis (where the passage keeps its stretch 1) is not the first unstable one, so the 3D check finds the 2D
     check's onset, on the passage. The facets around the polygonal passage differ in their states by the
-    discretization (1e-7), and which of them goes first depends on the partition: measured 6e-8 s apart on 2
-    ranks (equal to the printed digits on 1)."""
+    discretization (1e-7), and which of them goes first depends on the partition: measured up to 2.3e-7 s apart
+    on 2 ranks (equal to the printed digits on 1); a wrong surface state moves the onset by 1e-3 s or more."""
     over = ["material.film.modulus_ratio=1", "mesh.element_size=0.04", "mesh.film_layers=2",
             "stability.error_estimate=false", "reduced.beside_2d=false", "output.fields=false", "output.plot=false",
             "time.end=1.0"]
     s2 = simulate(config.load("configs/tube.toml", over), shared_tmp / "t2", comm, progress=False)["surface_onset"]
     cfg3 = config.load("configs/tube.toml", over + ["geometry.kind=tube-3d", "geometry.length=0.04"])
     s3 = simulate(cfg3, shared_tmp / "t3", comm, progress=False)["surface_onset"]
-    assert s3["time"] == pytest.approx(s2["time"], abs=2e-7)
+    assert s3["time"] == pytest.approx(s2["time"], abs=1e-6)
     assert np.hypot(*s3["where"][:2]) == pytest.approx(np.hypot(*s2["where"]), rel=1e-9)
