@@ -158,11 +158,11 @@ def test_misspelled_group_exits_2_naming_it(shared_tmp, capsys):
     assert "geometry.layers.rigth" in err and "right" in err
 
 
-def _merge(path):
+def _merge(path, dim: int = 2):
     gmsh.initialize()
     try:
         gmsh.option.setNumber("General.Terminal", 0)
-        return msh.merge(path)
+        return msh.merge(path, dim)
     finally:
         gmsh.finalize()
 
