@@ -141,6 +141,4 @@ class HalfSpace:
     def margin(self, F, s: float) -> float:
         """The smallest eigenvalue of the Jacobi-scaled operator (over the directions in 3D): negative exactly
         where it is indefinite."""
-        from app.reduced.modes import BandedPencil
-
-        return min(BandedPencil([self.band(G, s), 0.0, 0.0]).margin(0.0) for G in self.directions(F))
+        return min(self.margin_along(G, s) for G in self.directions(F))
