@@ -382,10 +382,12 @@ def validate(cfg: dict) -> None:
                           f"only; allowed for {kind.name!r}: 0 (refine it with mesh.element_size and "
                           "mesh.film_layers)")
     kind.validate(cfg)
-    for name in ("contact", "creases"):  # the surface's self-contact and the trial crease are 2D methods
-        if kind.three_d and cfg["stability"][name]:
-            raise ConfigError(f"stability.{name}", f"= true is 2D only; allowed for geometry.kind = '{kind.name}': "
-                              "false (docs/three-d.md, known gaps)")
+    if kind.three_d and cfg["stability"]["creases"]:  # the trial crease is a 2D method
+        raise ConfigError("stability.creases", f"= true is 2D only; allowed for geometry.kind = '{kind.name}': "
+                          "false (docs/three-d.md, known gaps)")
+    if kind.three_d and cfg["stability"]["contact"] and cfg["stability"]["contact_energy"] == "penalty":
+        raise ConfigError("stability.contact_energy", f"= 'penalty' is 2D only; allowed for geometry.kind = "
+                          f"'{kind.name}': 'barrier' or 'auto' (docs/creases.md)")
     if kind.named_materials:
         _validate_material_layers(cfg, sch)
     loading = _loadings().get(cfg["loading"]["kind"])

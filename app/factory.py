@@ -35,7 +35,10 @@ def problem(cfg: dict, comm, setup: geometry.GeometrySetup | None = None) -> Pro
     p = Problem(comm, setup, materials, loading, Discretization.from_config(cfg))
     stab = cfg.get("stability", {})
     if stab.get("contact"):
-        p.enable_contact(stab["contact_stiffness"])
+        energy = stab.get("contact_energy", "auto")
+        if energy == "auto":  # the penalty in 2D (validated longest), the barrier in 3D (the only one there)
+            energy = "barrier" if p.domain.geometry.dim == 3 else "penalty"
+        p.enable_contact(stab["contact_stiffness"], energy)
     return p
 
 

@@ -42,6 +42,11 @@ if ! installed; then
   installed || { echo "install: error: hydrobuckle is not importable from $venv or $venv/bin/hydrobuckle" \
                       "is missing after 'pip install -e $here'" >&2; exit 1; }
 fi
+# the pinned packages beyond Debian's (scripts/requirements.txt), without dependencies (numpy, scipy: Debian's)
+"$venv/bin/python" -m pip install --quiet --no-deps -r "$here/scripts/requirements.txt" 2>&1 \
+  | { grep -v "^WARNING: Location" || true; } || true  # a failure is named by the import check below
+"$venv/bin/python" -c "import ipctk" 2>/dev/null \
+  || { echo "install: error: pip could not install scripts/requirements.txt into $venv (PyPI unreachable?)" >&2; exit 1; }
 versions=$(cd / && "$venv/bin/hydrobuckle" version)  # whole output: a pipe closed early kills it (SIGPIPE)
 echo "install: ok, $(echo "$versions" | paste -sd ' ')"
 

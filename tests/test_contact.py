@@ -623,7 +623,7 @@ def test_the_deepest_contact_of_a_symmetric_crease_does_not_flip_with_roundoff()
     """A crease's two faces penetrate each other equally by symmetry: the history's contact place is the first
     in x of the equally deep (to 1e-6) contacts, whichever roundoff makes deeper (a 2-rank resumed run once
     reported x = 0.11 where the uninterrupted one had 0.09); a deeper contact elsewhere still wins."""
-    from app.model.problem import _deepest
+    from app.model.contact import _deepest
 
     X = np.array([[0.09, 0.5], [0.11, 0.5], [0.3, 0.5]])
     nodes = np.array([0, 1, 2])

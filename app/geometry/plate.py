@@ -8,16 +8,18 @@ plate's too, with a mode exp(i k.x) critical where |k| meets the 1D margin curve
 
 from __future__ import annotations
 
-from app.geometry.base import (MEMORY_BASE_MB, MEMORY_PER_DOF_KB, GeometryKind, GeometrySetup, base_key, base_role,
-                               layer_keys)
+from app.geometry.base import (MEMORY_BASE_MB, MEMORY_PER_DOF_KB, Drive, GeometryKind, GeometrySetup, base_key,
+                               base_role, layer_keys)
 from app.schema import ConfigError, gt, key
 
 
 class Plate(GeometryKind):
     name = "plate"
-    # swelling only: under a uniaxial drive the in-plane base state is anisotropic, so the 1D reduction over
-    # |k| that certifies a plate's onset does not apply (compression stays a plane-strain bilayer loading)
-    provides = frozenset()
+    # a displacement loading moves the right side (x = L) along x. Under that uniaxial drive the in-plane base
+    # state is anisotropic, so the 1D reduction over |k| that certifies a swelling plate's onset does not apply
+    # (app.reduced.section.LOADINGS: reported as not reducible); a plate one element wide is the plane-strain
+    # bilayer under the same drive
+    provides = frozenset({"drive"})
     three_d = True
     # a plate a few wavelengths wide at a size whose onset (with its error bar) takes minutes on 2 cores
     mesh_defaults = {"element_size": 0.0125, "film_layers": 2}
@@ -66,4 +68,5 @@ class Plate(GeometryKind):
         return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},
                              {"left": "roller_x", "right": "roller_x", "front": "roller_z", "back": "roller_z",
                               "bottom": base_role(geo), "top": "permeable"},
-                             wrinkles="plane", plot_band=6 * geo["film_thickness"])
+                             wrinkles="plane", plot_band=6 * geo["film_thickness"],
+                             drive=Drive("right", 0, geo["length"]))

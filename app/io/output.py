@@ -49,8 +49,14 @@ def versions() -> dict:
     def v(mod):
         return ".".join(str(x) for x in mod.Sys.getVersion())
 
+    try:  # the barrier self-contact's library (scripts/requirements.txt)
+        import ipctk
+
+        ipc = ipctk.__version__
+    except ImportError:
+        ipc = "not installed"
     return {"hydrobuckle": __version__, "dolfinx": dolfinx.__version__, "petsc": v(PETSc),
-            "slepc": v(SLEPc), "gmsh": gmsh.__version__}
+            "slepc": v(SLEPc), "gmsh": gmsh.__version__, "ipctk": ipc}
 
 
 def _clean(value):

@@ -39,7 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from app import compat
+from app.model.contact_surface import (CONTACT_ROLES, KAPPA_MAX, STIFFEN, ContactTerms, Facet,  # noqa: F401
+                                        GatheredSurface)
 
 REACH = 0.5  # a point is paired with a segment it has passed by at most this times the segment's length
 OVERLAP = 1e-3  # the tunnel check: a segment's projection range [0, 1] widened by this at each end
@@ -362,26 +363,9 @@ COLUMNS = ("contact_length_mm", "creases", "contact_x_mm", "contact_y_mm", "pene
 # the gap a state may show: a penetration beyond this fraction of the node's tributary length means the
 # penalty was overrun (a crossing the pairing no longer sees): the state is a model limit, not contact
 GAP_LIMIT = 0.1
-# a followed branch whose accepted state penetrates beyond GAP_LIMIT raises the penalty by STIFFEN and
-# solves the step again, up to KAPPA_MAX (the top of stability.contact_stiffness's range)
-STIFFEN = 10.0
-KAPPA_MAX = 1.0e6
-
-# roles of the surface that can touch itself: every boundary that holds no displacement component
-CONTACT_ROLES = ("permeable", "impermeable", "free")
 
 
-@dataclass
-class ContactTerms:
-    """The penalty at one iterate, in the global numbering of the mixed space (the same on every rank):
-    its energy and its gradient at ``grad_dofs``."""
-
-    energy: float
-    grad_dofs: np.ndarray  # (2 n,) global dofs (u_x, u_y of each surface node)
-    grad: np.ndarray  # (2 n,)
-
-
-class SurfaceContact:
+class SurfaceContact(GatheredSurface):
     """The self-contact penalty of a :class:`~app.model.problem.Problem`'s traction-free surface.
 
     The surface's nodes (their reference positions and global displacement dofs) and its segments
@@ -390,92 +374,20 @@ class SurfaceContact:
     a polyline of a few hundred nodes). The solvers add it to the energy, the residual and the Hessian
     (:class:`app.solvers.newton.NewtonSolver`'s ``extra``)."""
 
-    def __init__(self, problem, kappa: float):
-        p = self.p = problem
-        self.kappa = float(kappa)
-        self.raised: list[tuple[float, float]] = []  # (time, kappa) of each raise on a followed branch
-        mu = self._mu = max(float(getattr(m, m.law.stiffness)) for m in p.materials.values())
-        groups = [g for g in p.geo.boundaries if p.geo.boundaries[g] in CONTACT_ROLES]
-        domain, V, fdim = p.domain, p.V_u, p.domain.topology.dim - 1
-        facets = p.facets_of(groups)
-        n_owned_f = domain.topology.index_map(fdim).size_local
-        facets = facets[facets < n_owned_f]
-        domain.topology.create_connectivity(fdim, fdim + 1)
-        f2c = domain.topology.connectivity(fdim, fdim + 1)
-        points = V.tabulate_dof_coordinates()[:, :2]
-        gdofs = compat.global_indices(p.W, p.u_dofs)  # global W dof of each u dof (2 blk + c)
-        mids = compat.facet_midpoints(domain, facets) if len(facets) else np.empty((0, 2))
-        cells = np.array([f2c.links(f)[0] for f in facets], np.int32)
-        cmids = compat.cell_midpoints(domain, cells) if len(cells) else np.empty((0, 2))
-        domain.topology.create_connectivity(fdim, 0)
-        domain.topology.create_connectivity(fdim + 1, 0)
-        f2v, c2v = domain.topology.connectivity(fdim, 0), domain.topology.connectivity(fdim + 1, 0)
-        mine = []
-        for f, c, fm, cm in zip(facets, cells, mids, cmids):
-            # a P1 cell's dofs follow its vertices: the facet's two vertices' places in the cell give its dofs
-            corners = list(c2v.links(c))
-            cell_dofs = V.dofmap.cell_dofs(c)
-            blk = np.array([cell_dofs[corners.index(v)] for v in f2v.links(f)])
-            a, b = points[blk[0]], points[blk[1]]
-            t = b - a
-            if (fm - cm) @ np.array([t[1], -t[0]]) < 0:  # the right-hand normal must point out of the cell
-                blk = blk[::-1]
-            ends = [(int(gdofs[2 * k]), int(gdofs[2 * k + 1]), *points[k]) for k in blk]
-            mine.append(ends)
-        # in an order of the reference geometry alone (each segment's midpoint, then its first end: a slit's two
-        # coincident faces run opposite ways), not of the ranks' facets, so that the nodes, and the zones that
-        # summary.json lists by their first node, come in the same order on any number of ranks and partition
-        segs = sorted((s for part in p.comm.allgather(mine) for s in part),
-                      key=lambda e: ((e[0][2] + e[1][2]) / 2, (e[0][3] + e[1][3]) / 2, e[0][2], e[0][3]))
-        nodes: dict[int, int] = {}
-        X, dofs, pairs = [], [], []
-        for ends in segs:
-            ij = []
-            for gx, gy, x, y in ends:
-                if gx not in nodes:
-                    nodes[gx] = len(X)
-                    X.append((x, y))
-                    dofs.append((gx, gy))
-                ij.append(nodes[gx])
-            pairs.append(ij)
-        self.dofs = np.asarray(dofs, np.int64).reshape(-1, 2)
-        self.penalty = SelfContact(np.asarray(X, float).reshape(-1, 2), np.asarray(pairs, np.int64).reshape(-1, 2),
-                                   self.kappa * mu)
-        # the owned surface dofs of this rank: where the current displacement is read
-        n_owned = compat.owned_size(p.W)
-        local = {int(g): int(i) for i, g in zip(p.u_dofs, gdofs) if i < n_owned}
-        flat = self.dofs.reshape(-1)
-        self._mine = np.array([k for k, g in enumerate(flat) if int(g) in local], np.int64)
-        self._mine_local = np.array([local[int(flat[k])] for k in self._mine], np.int64)
-        # where this rank's owned surface entries sit in the displacement space (fields for ParaView)
-        in_u = {int(w): i for i, w in enumerate(p.u_dofs)}
-        self._mine_in_u = np.array([in_u[int(w)] for w in self._mine_local], np.int64)
+    name = "penalty"
 
-    def stiffen(self, t: float) -> bool:
-        """Raise kappa by STIFFEN (at the time ``t`` of the step that needs it); False, unchanged, when that
-        would pass KAPPA_MAX."""
-        if self.kappa * STIFFEN > KAPPA_MAX * (1 + 1e-12):
-            return False
-        self.set_kappa(self.kappa * STIFFEN)
-        self.raised.append((float(t), self.kappa))
-        return True
+    def __init__(self, problem, kappa: float):
+        super().__init__(problem, kappa)
+        self.penalty = SelfContact(self.X, np.asarray(self.facets, np.int64).reshape(-1, 2), self.kappa * self._mu)
+
+    def order(self, facets: list[Facet]) -> list[Facet]:
+        """Each segment's midpoint, then its first end (a slit's two coincident faces run opposite ways)."""
+        return sorted(facets, key=lambda f: ((f.points[0][0] + f.points[1][0]) / 2,
+                                             (f.points[0][1] + f.points[1][1]) / 2, *f.points[0]))
 
     def set_kappa(self, kappa: float) -> None:
         self.kappa = float(kappa)
         self.penalty.stiffness = self.kappa * self._mu
-
-    @property
-    def size(self) -> int:
-        return len(self.penalty.X)
-
-    def displacement(self, owned_values) -> np.ndarray:
-        """The surface nodes' displacement (n, 2) from each rank's owned part of a mixed-space array (a
-        PETSc vector's ``array`` or a Function's owned entries)."""
-        flat = np.zeros(self.dofs.size)
-        parts = self.p.comm.allgather((self._mine, np.asarray(owned_values)[self._mine_local]))
-        for k, v in parts:
-            flat[k] = v
-        return flat.reshape(-1, 2)
 
     def state(self, owned_values) -> ContactState:
         return self.penalty.pairs(self.displacement(owned_values))
@@ -506,43 +418,48 @@ class SurfaceContact:
         _, grad, _ = self.penalty.derivatives(self.displacement(owned_values), hessian=False)
         return -grad / self.penalty.tributary[:, None]
 
-    def traction_into(self, f, owned_values) -> None:
-        """Write :meth:`traction` into a Function ``f`` of the problem's displacement space."""
-        f.x.array[:] = 0.0
-        f.x.array[self._mine_in_u] = self.traction(owned_values).reshape(-1)[self._mine]
-        compat.scatter_forward(f)
-
     def entry_blocks(self, owned_values) -> list:
         """The Hessian's blocks at the state ``owned_values`` (owned part of a mixed-space array), as
         (surface entries, H): entry 2 i + c is node i's displacement component c."""
         return self.penalty.derivatives(self.displacement(owned_values))[2]
 
-    def entries_in(self, space, V, u_dofs) -> np.ndarray:
-        """Global dof in ``space`` of each surface entry (2 n,), for a mixed space whose displacement part,
-        collapsed, is ``V`` (P1 like the problem's; ``u_dofs``: V's index -> space's local dof), as the
-        stability criteria's own spaces: the numbering is carried over by interpolating entry numbers (P1
-        to P1 on one mesh: node to node, slits included)."""
-        p = self.p
-        number = compat.Function(p.V_u)
-        number.x.array[:] = -1.0
-        number.x.array[self._mine_in_u] = self._mine.astype(float)
-        compat.scatter_forward(number)
-        there = compat.Function(V)
-        compat.interpolate(there, number)
-        values = np.rint(there.x.array[:compat.owned_size(V)]).astype(np.int64)
-        local = np.flatnonzero(values >= 0)
-        glob = compat.global_indices(space, np.asarray(u_dofs)[local])
-        out = np.full(2 * self.size, -1, np.int64)
-        for k, g in p.comm.allgather((values[local], glob)):
-            out[k] = g
-        return out
-
-    @property
-    def global_entries(self) -> np.ndarray:
-        """Global dof in the problem's mixed space of each surface entry (2 n,)."""
-        return self.dofs.reshape(-1)
-
     def terms(self, owned_values) -> ContactTerms:
         """The energy and gradient at the state ``owned_values``, in the mixed space's global dofs."""
         energy, grad, _ = self.penalty.derivatives(self.displacement(owned_values), hessian=False)
         return ContactTerms(energy, self.global_entries, grad.reshape(-1))
+
+    def observables(self, owned_values) -> dict:
+        """history.csv's contact columns (COLUMNS) at a state: the surface length in contact, the zones, the
+        deepest contact's reference place and its penetration (the penalty's gap)."""
+        state = self.state(owned_values)
+        pen = self.penalty
+        deepest = _deepest(state.points, state.gaps, pen.Xp) if len(state.points) else None
+        return {"contact_length_mm": pen.contact_length(state), "creases": len(pen.zones(state)),
+                "contact_x_mm": float(pen.Xp[deepest, 0]) if deepest is not None else float("nan"),
+                "contact_y_mm": float(pen.Xp[deepest, 1]) if deepest is not None else float("nan"),
+                "penetration_mm": float(-state.gaps.min()) if len(state.gaps) else 0.0}
+
+    def zone_summary(self, owned_values) -> list[dict]:
+        """The contact zones of a state: each one's contact points' reference x and y range and its length."""
+        state = self.state(owned_values)
+        pen = self.penalty
+        zones = []
+        for points in pen.zones(state):
+            X = pen.Xp[points]
+            zones.append({"x_mm": [float(X[:, 0].min()), float(X[:, 0].max())],
+                          "y_mm": [float(X[:, 1].min()), float(X[:, 1].max())],
+                          "length_mm": float(np.sum(pen.share[points]))})
+        return zones
+
+
+DEEPEST_TIE = 1e-6  # gaps within this fraction of the deepest are equally deep (a symmetric crease's two faces)
+
+
+def _deepest(nodes: np.ndarray, gaps: np.ndarray, X: np.ndarray) -> int:
+    """The contact point (node or segment midpoint, reference positions ``X``) of the deepest contact: the least
+    gap, and among gaps equal to it within DEEPEST_TIE (a crease's two faces penetrate each other equally by
+    symmetry, and roundoff would pick either) the first in reference x, then y, so that the history's contact
+    place does not flip between runs that differ by roundoff."""
+    g = gaps.min()
+    near = nodes[gaps <= g + DEEPEST_TIE * abs(g)]
+    return int(near[np.lexsort((X[near, 1], X[near, 0]))[0]])

@@ -80,9 +80,15 @@ class Problem:
         self.contact = None  # the surface's self-contact term (app.model.contact.SurfaceContact), if on
         self._observables()
 
-    def enable_contact(self, kappa: float) -> None:
-        """Add the traction-free surface's self-contact penalty (interface stiffness kappa mu / h) to Pi."""
-        self.contact = SurfaceContact(self, kappa)
+    def enable_contact(self, kappa: float, energy: str = "penalty") -> None:
+        """Add the traction-free surface's self-contact to Pi: the penalty (2D; interface stiffness kappa mu /
+        h) or the barrier (2D and 3D; :mod:`app.model.barrier`)."""
+        if energy == "barrier":
+            from app.model.barrier import BarrierContact
+
+            self.contact = BarrierContact(self, kappa)
+        else:
+            self.contact = SurfaceContact(self, kappa)
 
     # --- setup helpers ---------------------------------------------------------------------
 
@@ -203,16 +209,8 @@ class Problem:
         out = {"growth_mm": self.growth(), "mu_bar": self.loading.mu_bar(t), "fluid_volume": self.fluid_volume(),
                "applied_strain": self.loading.applied_strain(t), "amplitude_mm": amplitude,
                "wrinkle_count": count, "energy": self.stored_energy()}
-        if self.contact is not None:  # with self-contact: the surface length in contact, the zones, the
-            # deepest contact's reference place and its penetration (the penalty's gap)
-            c = self.contact
-            state = c.state(self.state.x.array)
-            zones = c.penalty.zones(state)
-            deepest = _deepest(state.points, state.gaps, c.penalty.Xp) if len(state.points) else None
-            out["extra"] = {"contact_length_mm": c.penalty.contact_length(state), "creases": len(zones),
-                            "contact_x_mm": float(c.penalty.Xp[deepest, 0]) if deepest is not None else float("nan"),
-                            "contact_y_mm": float(c.penalty.Xp[deepest, 1]) if deepest is not None else float("nan"),
-                            "penetration_mm": float(-state.gaps.min()) if len(state.gaps) else 0.0}
+        if self.contact is not None:  # with self-contact: its history columns (app.model.contact.COLUMNS)
+            out["extra"] = self.contact.observables(self.state.x.array)
         return out
 
     def fluid_volume(self) -> float:
@@ -228,16 +226,3 @@ class Problem:
 
     def cells(self) -> int:
         return compat.num_global_cells(self.domain)
-
-
-DEEPEST_TIE = 1e-6  # gaps within this fraction of the deepest are equally deep (a symmetric crease's two faces)
-
-
-def _deepest(nodes: np.ndarray, gaps: np.ndarray, X: np.ndarray) -> int:
-    """The contact point (node or segment midpoint, reference positions ``X``) of the deepest contact: the least gap, and among gaps equal to it within DEEPEST_TIE (a crease's
-    two faces penetrate each other equally by symmetry, and roundoff would pick either) the first in reference
-    x, then y, so that the history's contact place does not flip between runs that differ by roundoff."""
-    g = gaps.min()
-    near = nodes[gaps <= g + DEEPEST_TIE * abs(g)]
-    return int(near[np.lexsort((X[near, 1], X[near, 0]))[0]])
-

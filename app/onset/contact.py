@@ -119,15 +119,9 @@ def contact_summary(problem, rows: list[dict]) -> dict:
         r = touching[0]
         first = {"time": r["time"], "growth_mm": r["growth_mm"], "applied_strain": r["applied_strain"],
                  "position_mm": [r["contact_x_mm"], r["contact_y_mm"]]}
-    state = c.state(problem.state.x.array)
-    zones = []
-    for points in c.penalty.zones(state):
-        X = c.penalty.Xp[points]
-        zones.append({"x_mm": [float(X[:, 0].min()), float(X[:, 0].max())],
-                      "y_mm": [float(X[:, 1].min()), float(X[:, 1].max())],
-                      "length_mm": float(np.sum(c.penalty.share[points]))})
+    zones = c.zone_summary(problem.state.x.array)
     raised = [{"time": t, "contact_stiffness": k} for t, k in c.raised]
-    return {"contact": "penalty", "contact_stiffness": c.kappa, "stiffened": raised, "first_contact": first,
+    return {"contact": c.name, "contact_stiffness": c.kappa, "stiffened": raised, "first_contact": first,
             "max_penetration_mm": max((float(r.get("penetration_mm") or 0.0) for r in rows), default=0.0),
             "zones": zones}
 
@@ -138,6 +132,12 @@ def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
     :meth:`app.model.contact.SurfaceContact.objective`), or penetrates deeper than GAP_LIMIT of its
     element."""
     c = problem.contact
+    if c.name == "barrier":  # no penetration to overrun; only a crossing the step filter missed
+        where = c.crossing(array)
+        if where is None:
+            return None
+        return Limit("contact", where[:2], "the surface passes through itself (a step the barrier's collision "
+                     "filter did not stop: a shorter step)", OVERRUN, overshoot=True)
     state = c.state(array)
     pen = c.penalty
     if len(state.points):

@@ -45,8 +45,12 @@ STABILITY: dict[str, Key] = {
                         "state's content (undrained), both states in equilibrium with the bath; or both states hold "
                         "the run's own transient content at each time (transient: a bilayer, from its exact 1D "
                         "transient); without fluid motion it has no effect"),
-    "contact": key(bool, False, None, "self-contact of the traction-free surface as a penalty term: a followed "
+    "contact": key(bool, False, None, "self-contact of the traction-free surface as a term of the energy: a followed "
                    "branch goes on past the fold into creases (docs/creases.md)"),
+    "contact_energy": key(str, "auto", one_of("auto", "penalty", "barrier"),
+                          "self-contact's energy: the penalty (2D) or the smooth barrier of incremental potential "
+                          "contact (2D and 3D; no state or iterate passes through the surface); auto: the penalty "
+                          "in 2D, the barrier in 3D (docs/creases.md)"),
     "contact_stiffness": key(float, 1000.0, in_closed(10.0, 1.0e6),
                              "the penalty's kappa (self-contact; a growing trial crease's mirror): interface "
                              "stiffness kappa mu / h (penetration ~ p / (kappa mu) of an element)"),

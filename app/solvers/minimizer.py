@@ -248,6 +248,10 @@ class MinimizingNewton(NewtonSolver):
                 return False
             e0 = self._objective(snes, x)
             step = self.escape_length / vmax
+            if getattr(self.extra, "step_fraction", None) is not None:  # a barrier: no step through the surface
+                w.set(0.0)
+                w.axpy(-step, v)
+                step *= self.extra.step_fraction(x.array_r, w.array_r)
             for _ in range(5):
                 trial.waxpy(step, v, x)
                 e = self._objective(snes, trial)
@@ -287,7 +291,10 @@ class MinimizingNewton(NewtonSolver):
                     its -= 1
                     break
                 ksp.solve(b, dx)
-                x.axpy(-1.0, dx)
+                fraction = 1.0
+                if getattr(self.extra, "step_fraction", None) is not None:  # a barrier: no step through the surface
+                    fraction = self.extra.step_fraction(x.array_r, dx.array_r)
+                x.axpy(-fraction, dx)
                 self._residual(snes, x, b)
                 fnorm = b.norm()
                 reason = self._converged(snes, its, (x.norm(), dx.norm(), fnorm))

@@ -177,6 +177,19 @@ class NewtonSolver:
             u_is, q_is = self._field_index_sets(fields)
             ksp.getPC().setFieldSplitIS(("u", u_is), ("q", q_is))
         ksp.getPC().setFromOptions()
+        if getattr(extra, "step_fraction", None) is not None:  # a barrier: every iterate stays free of crossings
+            self.snes.setLineSearchPreCheck(self._step_filter)
+            self.filtered_steps = 0
+
+    def _step_filter(self, x, y, *args) -> None:
+        """The line search's precheck with a barrier term: the update y (the iterate moves to x - lambda y,
+        lambda <= 1) is shortened to the part of it that continuous collision detection finds free of any
+        crossing of the surface (``extra.step_fraction``), so that no trial point of the line search lies
+        beyond the barrier, where its energy is not defined."""
+        fraction = self.extra.step_fraction(x.array_r, y.array_r)
+        if fraction < 1.0:
+            y.scale(fraction)
+            self.filtered_steps += 1
 
     @staticmethod
     def _iterative_options(rtol: float, max_it: int) -> dict:

@@ -1,0 +1,142 @@
+"""The barrier self-contact (stability.contact_energy = "barrier"; app/model/barrier.py, docs/creases.md): its
+derivatives against finite differences in 2D and 3D, its step filter against a crossing, the 3D plate one
+element wide in contact against the plane-strain run with the same barrier, and the checks of its config."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from app import config
+from app.model.barrier import Barrier, triangles
+from app.schema import ConfigError
+
+pytest.importorskip("ipctk")
+
+
+def _bent_2d():
+    """A flat face and a bent face above it, the bent one's middle node within the barrier's reach."""
+    X = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [0.2, 0.3], [0.45, 0.004], [0.8, 0.35]])
+    edges = np.array([[0, 1], [1, 2], [5, 4], [4, 3]])
+    return X, edges, None
+
+
+def _plates_3d():
+    """Two parallel squares of two triangles each, the upper one tilted so that one corner comes within
+    reach of the lower one."""
+    X = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1],  # y up, as the plate's
+                  [0.1, 0.003, 0.1], [0.9, 0.05, 0.1], [0.9, 0.06, 0.9], [0.1, 0.01, 0.9]], float)
+    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6]])
+    import ipctk
+
+    return X, ipctk.edges(faces.astype(np.int32)), faces
+
+
+def _dense(blocks, size):
+    H = np.zeros((size, size))
+    for entries, h in blocks:
+        H[np.ix_(entries, entries)] += h
+    return H
+
+
+@pytest.mark.parametrize("case", [_bent_2d, _plates_3d], ids=["2D", "3D"])
+def test_the_barrier_has_its_finite_difference_derivatives(case):
+    """Energy -> gradient and gradient -> Hessian (the blocks summed over the pairs) by central differences at a
+    state where the pairs are within reach (E > 0), to the differences' truncation (relative 1e-6)."""
+    X, edges, faces = case()
+    bar = Barrier(X, edges, faces, stiffness=1.0, reach=0.02)
+    rng = np.random.default_rng(7)
+    u = 1e-4 * rng.standard_normal(X.shape)
+    energy, grad, blocks = bar.derivatives(u)
+    assert energy > 0 and np.isfinite(energy)
+    eps = 1e-7
+    n = X.size
+    fd_grad, fd_hess = np.zeros(n), np.zeros((n, n))
+    for k in range(n):
+        d = np.zeros(n)
+        d[k] = eps
+        up, um = u + d.reshape(X.shape), u - d.reshape(X.shape)
+        fd_grad[k] = (bar.energy(up) - bar.energy(um)) / (2 * eps)
+        fd_hess[:, k] = (bar.derivatives(up, hessian=False)[1].reshape(-1)
+                         - bar.derivatives(um, hessian=False)[1].reshape(-1)) / (2 * eps)
+    assert np.allclose(grad.reshape(-1), fd_grad, rtol=1e-6, atol=1e-6 * np.abs(fd_grad).max())
+    H = _dense(blocks, n)
+    assert np.allclose(H, fd_hess, rtol=1e-5, atol=1e-5 * np.abs(fd_hess).max())
+    assert np.allclose(H, H.T, atol=1e-12 * np.abs(H).max())
+
+
+def test_a_step_through_the_surface_is_cut_to_the_part_before_the_crossing():
+    """A node driven straight through the face below it: the straight path crosses at the face (a fraction
+    0.004 / 0.012 of it), the filter's fraction stops short of that, and the end state, through the face, is
+    outside the term's domain (infinite energy)."""
+    X, edges, faces = _bent_2d()
+    bar = Barrier(X, edges, faces, stiffness=1.0, reach=0.002)
+    u1 = np.zeros_like(X)
+    u1[4, 1] = -0.012  # node 4 (at y = 0.004) to y = -0.008: through the flat face
+    fraction = bar.step_fraction(np.zeros_like(X), u1)
+    assert 0.0 < fraction < 0.004 / 0.012
+    assert np.isfinite(bar.energy(fraction * u1)) and bar.energy(u1) == np.inf
+
+
+def test_a_quadrilateral_splits_alike_whatever_its_vertex_order():
+    X = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]], float)
+    ref = triangles([0, 1, 2, 3], X)
+    for order in ([3, 2, 1, 0], [1, 3, 0, 2], [2, 0, 3, 1]):
+        assert triangles(order, X) == ref
+    # two triangles covering the quadrilateral: the diagonal joins 0 and its opposite corner, 2
+    assert ref == [[0, 1, 2], [0, 2, 3]]
+
+
+def test_a_surface_touching_itself_in_the_reference_is_refused():
+    """A slit's two faces on each other: distance 0, where the barrier is infinite."""
+    X = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.0, 0.0]])
+    with pytest.raises(ValueError, match="touches itself"):
+        Barrier(X, np.array([[0, 1], [2, 3]]), None, 1.0)
+
+
+def test_three_d_contact_takes_the_barrier_and_refuses_the_penalty():
+    base = {"geometry": {"kind": "plate"}, "stability": {"contact": True, "after_onset": "branch"}}
+    config.resolve(base, [])  # auto: the barrier
+    config.resolve(base, ["stability.contact_energy=barrier"])
+    with pytest.raises(ConfigError, match="stability.contact_energy"):
+        config.resolve(base, ["stability.contact_energy=penalty"])
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: a 2D and a 3D run side by side")
+def test_a_plate_one_element_wide_creases_in_contact_as_the_plane_strain_layer(tmp_path):
+    """tests/test_contact.py's creasing layer with the barrier, in 2D and as a plate one element (0.01 mm) wide
+    (rollers on both faces, so plane strain): the same onset (1e-8 s), the same steps, the first contact at the
+    same time, and every state in contact within the barrier's accuracy of the 2D one: the amplitude within
+    0.1 of the barrier's reach d_hat (measured up to 0.011 d_hat), the energy per width within 1e-5 (the
+    barrier's share of the energy differs between the 2D segments and the 3D triangles; measured 7.4e-7); no
+    state of either penetrates, and each minimizing step lowered the energy (no energy rejections)."""
+    from conftest import read_csv
+    from test_contact import CREASING
+
+    from app.model.barrier import BARRIER_REACH
+    from app.workflows.run import simulate
+
+    flat_cfg = config.resolve(CREASING, ["stability.contact_energy=barrier"])
+    plate = copy.deepcopy(CREASING)
+    width = CREASING["mesh"]["element_size"]
+    plate["geometry"] = {"kind": "plate", "width": width, **plate["geometry"]}
+    flat = simulate(flat_cfg, tmp_path / "2d", MPI.COMM_SELF, progress=False)
+    slab = simulate(config.resolve(plate, []), tmp_path / "3d", MPI.COMM_SELF, progress=False)
+    assert slab["creases"]["contact"] == flat["creases"]["contact"] == "barrier"
+    assert slab["critical"]["time"] == pytest.approx(flat["critical"]["time"], rel=1e-8)
+    a, b = read_csv(tmp_path / "2d" / "history.csv"), read_csv(tmp_path / "3d" / "history.csv")
+    assert [r["time"] for r in a] == [r["time"] for r in b]
+    assert slab["creases"]["first_contact"]["time"] == flat["creases"]["first_contact"]["time"]
+    dhat = BARRIER_REACH * CREASING["mesh"]["element_size"]  # the top's shortest segment: one element
+    touching = [(ra, rb) for ra, rb in zip(a, b) if float(ra["contact_length_mm"]) > 0]
+    assert len(touching) >= 4
+    for ra, rb in touching:
+        assert abs(float(ra["amplitude_mm"]) - float(rb["amplitude_mm"])) < 0.1 * dhat
+        assert float(rb["energy"]) / width == pytest.approx(float(ra["energy"]), rel=1e-5)
+        assert float(ra["penetration_mm"]) == float(rb["penetration_mm"]) == 0.0
+    for s in (flat, slab):
+        assert s["postbuckling"]["minimizer"]["energy_rejections"] == 0, s["postbuckling"]["minimizer"]
