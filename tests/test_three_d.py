@@ -142,16 +142,18 @@ def test_the_plate_lattice_lists_equal_wavenumbers_together():
 
 
 @pytest.mark.parametrize("kind", ["plate", "tube-3d"])
-@pytest.mark.parametrize("setting, value", [("contact", True), ("creases", True)])
-def test_the_2d_only_options_are_refused_in_3d_with_one_line(shared_tmp, capsys, setting, value, kind):
-    """Self-contact and the trial crease read the surface as a curve: a plate or 3D tube config asking for them
-    gets one line naming the key and what is allowed, exit 2, and no result directory."""
+@pytest.mark.parametrize("sets, setting", [(["stability.creases=true"], "creases"),
+                                           (["stability.contact=true", 'stability.contact_energy="penalty"'],
+                                            "contact_energy")])
+def test_the_2d_only_options_are_refused_in_3d_with_one_line(shared_tmp, capsys, sets, setting, kind):
+    """The trial crease and the contact penalty read the surface as a curve: a plate or 3D tube config asking
+    for them gets one line naming the key and what is allowed, exit 2, and no result directory (3D contact is
+    the barrier's: tests/test_barrier.py)."""
     from app import cli
 
     out = shared_tmp / f"refused-{kind}-{setting}"
-    text = f"{value}".lower() if isinstance(value, bool) else f'"{value}"'
-    code = cli.main(["run", str(REPO / "configs" / f"{kind}.toml"), "--set", f"stability.{setting}={text}",
-                     "-o", str(out)])
+    args = [a for kv in sets for a in ("--set", kv)]
+    code = cli.main(["run", str(REPO / "configs" / f"{kind}.toml"), *args, "-o", str(out)])
     err = capsys.readouterr().err
     assert code == 2 and not out.exists()
     if MPI.COMM_WORLD.rank == 0:
