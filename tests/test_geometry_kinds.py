@@ -84,8 +84,8 @@ def test_a_registered_kind_is_accepted_by_config(toy):
     with pytest.raises(ConfigError, match="too coarse for the toy slab"):
         config.resolve({"geometry": {"kind": "toy-slab", "span": 0.04}})
     # it provides no drive: compression is refused with the kinds that have one
-    with pytest.raises(ConfigError, match="'compression' needs geometry.kind = 'bilayer'; allowed for 'toy-slab': "
-                                          "'swelling'"):
+    with pytest.raises(ConfigError, match="'compression' needs geometry.kind = 'bilayer' or 'plate'; allowed for "
+                                          "'toy-slab': 'swelling'"):
         config.resolve({"geometry": {"kind": "toy-slab"}, "loading": {"kind": "compression"}})
     # the other kinds' keys are still theirs
     with pytest.raises(ConfigError, match="not used by geometry.kind = 'bilayer'"):
