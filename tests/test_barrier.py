@@ -11,7 +11,7 @@ import pytest
 from mpi4py import MPI
 
 from app import config
-from app.model.barrier import Barrier, triangles
+from app.model.barrier import Barrier, cyclic, split
 from app.schema import ConfigError
 
 pytest.importorskip("ipctk")
@@ -21,18 +21,18 @@ def _bent_2d():
     """A flat face and a bent face above it, the bent one's middle node within the barrier's reach."""
     X = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [0.2, 0.3], [0.45, 0.004], [0.8, 0.35]])
     edges = np.array([[0, 1], [1, 2], [5, 4], [4, 3]])
-    return X, edges, None
+    return X, edges, None, None
 
 
 def _plates_3d():
-    """Two parallel squares of two triangles each, the upper one tilted so that one corner comes within
-    reach of the lower one."""
-    X = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1],  # y up, as the plate's
-                  [0.1, 0.003, 0.1], [0.9, 0.05, 0.1], [0.9, 0.06, 0.9], [0.1, 0.01, 0.9]], float)
-    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6]])
+    """Two squares, each cut into four triangles about its centre (:func:`split`), the upper one tilted so that
+    one corner comes within reach of the lower one."""
     import ipctk
 
-    return X, ipctk.edges(faces.astype(np.int32)), faces
+    X = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1],  # y up, as the plate's
+                  [0.1, 0.003, 0.1], [0.9, 0.05, 0.1], [0.9, 0.06, 0.9], [0.1, 0.01, 0.9]], float)
+    centres, faces = split([[0, 1, 2, 3], [4, 5, 6, 7]], X)
+    return X, ipctk.edges(faces.astype(np.int32)), faces, centres
 
 
 def _dense(blocks, size):
@@ -46,8 +46,8 @@ def _dense(blocks, size):
 def test_the_barrier_has_its_finite_difference_derivatives(case):
     """Energy -> gradient and gradient -> Hessian (the blocks summed over the pairs) by central differences at a
     state where the pairs are within reach (E > 0), to the differences' truncation (relative 1e-6)."""
-    X, edges, faces = case()
-    bar = Barrier(X, edges, faces, stiffness=1.0, reach=0.02)
+    X, edges, faces, centres = case()
+    bar = Barrier(X, edges, faces, stiffness=1.0, reach=0.02, centres=centres)
     rng = np.random.default_rng(7)
     u = 1e-4 * rng.standard_normal(X.shape)
     energy, grad, blocks = bar.derivatives(u)
@@ -72,7 +72,7 @@ def test_a_step_through_the_surface_is_cut_to_the_part_before_the_crossing():
     """A node driven straight through the face below it: the straight path crosses at the face (a fraction
     0.004 / 0.012 of it), the filter's fraction stops short of that, and the end state, through the face, is
     outside the term's domain (infinite energy)."""
-    X, edges, faces = _bent_2d()
+    X, edges, faces, _ = _bent_2d()
     bar = Barrier(X, edges, faces, stiffness=1.0, reach=0.002)
     u1 = np.zeros_like(X)
     u1[4, 1] = -0.012  # node 4 (at y = 0.004) to y = -0.008: through the flat face
@@ -81,13 +81,19 @@ def test_a_step_through_the_surface_is_cut_to_the_part_before_the_crossing():
     assert np.isfinite(bar.energy(fraction * u1)) and bar.energy(u1) == np.inf
 
 
-def test_a_quadrilateral_splits_alike_whatever_its_vertex_order():
-    X = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]], float)
-    ref = triangles([0, 1, 2, 3], X)
+def test_a_quadrilateral_is_cut_into_four_triangles_alike_whatever_its_vertex_order():
+    """A skewed quadrilateral (its short diagonal from the first node) in any vertex order: the same ring around
+    it, and four triangles about the centre that cover its area with the outward normal of the ring."""
+    X = np.array([[0, 0, 0], [1, 0, 0], [1.8, 0, 0.6], [0.8, 0, 0.6]], float)  # y up: a flat facet
+    ref = cyclic([0, 1, 2, 3], X)
+    assert ref == [0, 1, 2, 3]
     for order in ([3, 2, 1, 0], [1, 3, 0, 2], [2, 0, 3, 1]):
-        assert triangles(order, X) == ref
-    # two triangles covering the quadrilateral: the diagonal joins 0 and its opposite corner, 2
-    assert ref == [[0, 1, 2], [0, 2, 3]]
+        assert cyclic(order, X) == ref
+    centres, tris = split([[2, 0, 3, 1]], X)
+    assert centres.tolist() == [ref] and tris.tolist() == [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]
+    Xc = np.concatenate([X, X.mean(axis=0, keepdims=True)])
+    areas = [0.5 * np.linalg.norm(np.cross(Xc[b] - Xc[a], Xc[c] - Xc[a])) for a, b, c in tris]
+    assert sum(areas) == pytest.approx(0.6, rel=1e-14)  # base 1 x height 0.6
 
 
 def test_a_surface_touching_itself_in_the_reference_is_refused():
@@ -111,9 +117,9 @@ def test_a_plate_one_element_wide_creases_in_contact_as_the_plane_strain_layer(t
     """tests/test_contact.py's creasing layer with the barrier, in 2D and as a plate one element (0.01 mm) wide
     (rollers on both faces, so plane strain): the same onset (1e-8 s), the same steps, the first contact at the
     same time, and every state in contact within the barrier's accuracy of the 2D one: the amplitude within
-    0.1 of the barrier's reach d_hat (measured up to 0.011 d_hat), the energy per width within 1e-5 (the
-    barrier's share of the energy differs between the 2D segments and the 3D triangles; measured 7.4e-7); no
-    state of either penetrates, and each minimizing step lowered the energy (no energy rejections)."""
+    the barrier's reach d_hat (the 3D surface's triangles about each quadrilateral's centre hold the faces apart
+    otherwise than the 2D segments, within d_hat: measured 0.74 d_hat), the energy per width within 1e-4
+    (measured 6.5e-5); no state of either penetrates, and no minimizing step raised the energy."""
     from conftest import read_csv
     from test_contact import CREASING
 
@@ -135,8 +141,53 @@ def test_a_plate_one_element_wide_creases_in_contact_as_the_plane_strain_layer(t
     touching = [(ra, rb) for ra, rb in zip(a, b) if float(ra["contact_length_mm"]) > 0]
     assert len(touching) >= 4
     for ra, rb in touching:
-        assert abs(float(ra["amplitude_mm"]) - float(rb["amplitude_mm"])) < 0.1 * dhat
-        assert float(rb["energy"]) / width == pytest.approx(float(ra["energy"]), rel=1e-5)
+        assert abs(float(ra["amplitude_mm"]) - float(rb["amplitude_mm"])) < dhat
+        assert float(rb["energy"]) / width == pytest.approx(float(ra["energy"]), rel=1e-4)
         assert float(ra["penetration_mm"]) == float(rb["penetration_mm"]) == 0.0
     for s in (flat, slab):
         assert s["postbuckling"]["minimizer"]["energy_rejections"] == 0, s["postbuckling"]["minimizer"]
+
+
+# the barrier's states on 1 and 2 ranks differ beyond roundoff: near d_hat the barrier is soft (b'' -> 0 there),
+# so the contact state is ill-conditioned and the parallel roundoff moves it (measured: amplitude 7.5e-5 of its
+# scale, growth 1.2e-6, energy 4e-9). The penalty's agree to 1e-8 (tests/test_contact.py)
+TWO_RANKS = 1e-4
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run in contact with a serial one")
+def test_a_crease_in_barrier_contact_is_the_same_on_1_and_2_ranks(tmp_path):
+    """The creasing layer with the barrier on 2 ranks against the same run on one (every rank alone): the same
+    steps, every column within TWO_RANKS of its scale, and the crease in the same place (the barrier has no
+    kinks: the penalty's symmetric crease may end in mirror images, tests/test_contact.py). Not compared: the
+    negative eigenvalue count, which differs at the first state in contact (a soft barrier's near-zero mode:
+    1 on one rank, 0 or 1 on two, measured; docs/creases.md)."""
+    from pathlib import Path
+
+    from conftest import read_csv
+    from test_contact import CREASING
+
+    from app.workflows.run import simulate
+
+    comm = MPI.COMM_WORLD
+    base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
+    cfg = config.resolve(CREASING, ["stability.contact_energy=barrier"])
+    dist = simulate(cfg, base / "dist", comm, progress=False)
+    serial = simulate(cfg, tmp_path / f"serial{comm.rank}", MPI.COMM_SELF, progress=False)
+    assert dist["status"] == serial["status"] == "buckled"
+    a, b = read_csv(tmp_path / f"serial{comm.rank}" / "history.csv"), read_csv(base / "dist" / "history.csv")
+    assert len(a) == len(b) and any(float(r["contact_length_mm"]) > 0 for r in a)
+    worst: dict[str, float] = {}
+    for k in a[0]:
+        if k in ("newton_its", "negative_eigenvalues"):  # roundoff's path near contact; see the docstring
+            continue
+        col = [float(r[k]) for r in a if r[k] not in ("", "nan")]
+        scale = max((abs(v) for v in col if np.isfinite(v)), default=0.0) or 1.0
+        for ra, rb in zip(a, b):
+            if ra[k] in ("", "nan") or not np.isfinite(float(ra[k])):
+                assert rb[k] == ra[k] or not np.isfinite(float(rb[k]))
+                continue
+            worst[k] = max(worst.get(k, 0.0), abs(float(ra[k]) - float(rb[k])) / scale)
+    assert max(worst.values()) <= TWO_RANKS, worst
+    first, ref = dict(dist["creases"]["first_contact"]), dict(serial["creases"]["first_contact"])
+    assert first.pop("growth_mm") == pytest.approx(ref.pop("growth_mm"), rel=TWO_RANKS)
+    assert first == ref  # the same time, strain and place

@@ -1,7 +1,7 @@
 """Self-contact as a smooth barrier (incremental potential contact), the same code in 2D and 3D.
 
 The surface that can touch itself (:mod:`app.model.contact_surface`: segments in 2D, each hexahedron's
-quadrilateral facet split into two triangles in 3D) carries the barrier of the IPC Toolkit (``ipctk``, pinned
+quadrilateral facet cut into four triangles about its centre in 3D) carries the barrier of the IPC Toolkit (``ipctk``, pinned
 in scripts/requirements.txt) in its convergent form (Li et al.: each pair of surface primitives weighted by
 its reference area, overlapping pairs corrected by the improved max approximator):
 
@@ -31,6 +31,7 @@ from app.model.contact_surface import ContactTerms, Facet, GatheredSurface
 
 BARRIER_REACH = 0.05  # d_hat: this fraction of the shortest reference edge of the surface
 STEP_SAFETY = 0.9  # a Newton step starts at this fraction of the largest collision-free step
+CCD_ITERATIONS = 100_000  # conservative advancement's iterations per pair (it stops short, safely, beyond)
 
 
 def _ipctk():
@@ -44,45 +45,86 @@ def _ipctk():
     return ipctk
 
 
-def triangles(quad: list[int], X: np.ndarray) -> list[list[int]]:
-    """A quadrilateral facet's two triangles, split along the diagonal from its first node in the reference
-    numbering (the surface's node order, the same on any number of ranks): the node opposite it is the
-    farthest of the other three."""
-    q = sorted(quad)
-    first, rest = q[0], q[1:]
-    opposite = max(rest, key=lambda k: float(np.linalg.norm(X[k] - X[first])))
-    a, b = (k for k in rest if k != opposite)
-    return [[first, a, opposite], [first, opposite, b]]
+def cyclic(quad: list[int], X: np.ndarray) -> list[int]:
+    """A quadrilateral's nodes in order around it (from its first node in the reference numbering, toward the
+    lower numbered of its two neighbours): by their angle about the centroid in the quadrilateral's own plane
+    (its two principal directions), whatever order the nodes come in."""
+    P = X[quad] - X[quad].mean(axis=0)
+    if P.shape[1] == 3:
+        _, _, vt = np.linalg.svd(P)
+        P = P @ vt[:2].T
+    around = [quad[k] for k in np.argsort(np.arctan2(P[:, 1], P[:, 0]))]
+    start = around.index(min(around))
+    around = around[start:] + around[:start]
+    return around if around[1] < around[3] else [around[0], *around[:0:-1]]
+
+
+def split(quads: list[list[int]], X: np.ndarray):
+    """The surface's quadrilaterals as triangles: each cut into four about its centre, a vertex of its own (the
+    mean of its four nodes, where the bilinear face is), so that no diagonal is preferred (a fold's two faces
+    are mirror images). Returns the centres' nodes (q, 4) and the triangles (4 q, 3) in the numbering of the
+    nodes followed by the centres."""
+    n = len(X)
+    centres, tris = [], []
+    for k, quad in enumerate(quads):
+        ring = cyclic(quad, X)
+        centres.append(ring)
+        tris += [[ring[i], ring[(i + 1) % 4], n + k] for i in range(4)]
+    return np.asarray(centres, np.int64).reshape(-1, 4), np.asarray(tris, np.int64).reshape(-1, 3)
 
 
 class Barrier:
     """The barrier on a surface of nodes at reference positions ``X`` (n, dim) with ``edges`` (m, 2) and, in
-    3D, triangular ``faces`` (f, 3); ``stiffness`` is kappa mu (MPa)."""
+    3D, triangular ``faces`` (f, 3), numbered over the nodes followed by ``centres`` (rows of four nodes: a
+    vertex at their mean each; :func:`split`); ``stiffness`` is kappa mu (MPa). Every function takes and gives
+    the nodes' displacements: the centres follow their nodes."""
 
     def __init__(self, X: np.ndarray, edges: np.ndarray, faces: np.ndarray | None, stiffness: float,
-                 reach: float | None = None):
+                 reach: float | None = None, centres: np.ndarray | None = None):
         ipc = self.ipc = _ipctk()
         self.X = np.asarray(X, float)
-        self.dim = self.X.shape[1]
+        self.n, self.dim = self.X.shape
+        self.centres = np.zeros((0, 4), np.int64) if centres is None else np.asarray(centres, np.int64)
+        self.Xc = self._vertices(self.X)
         edges = np.asarray(edges, np.int32).reshape(-1, 2)
         faces = np.zeros((0, 3), np.int32) if faces is None else np.asarray(faces, np.int32).reshape(-1, 3)
-        self.mesh = ipc.CollisionMesh(self.X, edges, faces)
-        lengths = np.linalg.norm(self.X[edges[:, 1]] - self.X[edges[:, 0]], axis=1)
+        self.mesh = ipc.CollisionMesh(self.Xc, edges, faces)
+        # sweep and prune: its memory follows the primitives, not the space a step sweeps (the default hash grid
+        # allocated 24 GB for a far-reaching trial step of a shifted Newton direction, measured)
+        self.broad = ipc.SweepAndPrune()
+        # conservative advancement (additive CCD): bounded work per pair; Tight Inclusion (the default) took
+        # minutes on one step of a fold whose faces rest a barrier's reach apart (measured)
+        self.ccd = ipc.AdditiveCCD(CCD_ITERATIONS)
+        # the reach from the surface's own edges (between nodes: a quadrilateral's sides and diagonals, not its
+        # centre's spokes), so that a plate one element wide has the plane-strain layer's d_hat
+        own = edges[(edges < self.n).all(axis=1)]
+        lengths = np.linalg.norm(self.Xc[own[:, 1]] - self.Xc[own[:, 0]], axis=1)
         self.dhat = float(BARRIER_REACH * lengths.min()) if reach is None else float(reach)
         self.stiffness = float(stiffness)
-        if ipc.has_intersections(self.mesh, self.X) or \
-                self._collisions(self.X).compute_minimum_distance(self.mesh, self.X) <= 0.0:
+        if ipc.has_intersections(self.mesh, self.Xc, self.broad) or \
+                self._collisions(self.Xc).compute_minimum_distance(self.mesh, self.Xc) <= 0.0:
             raise ValueError("the contact surface touches itself in the reference (a slit: its two faces lie on "
                              "each other, where the barrier is infinite)")
-        # the area each node stands for (half its segments in 2D; a third of its triangles in 3D): tractions
-        self.area = np.asarray(self.mesh.vertex_areas, float).reshape(-1)
+        # the area each node stands for (half its segments in 2D; its share of the triangles in 3D, a centre's
+        # shared equally by its four nodes): tractions
+        self.area = self.to_nodes(np.asarray(self.mesh.vertex_areas, float).reshape(-1, 1))[:, 0]
+
+    def _vertices(self, x: np.ndarray) -> np.ndarray:
+        """The collision vertices at node positions (or displacements) ``x``: the nodes, then the centres."""
+        return np.ascontiguousarray(np.concatenate([x, x[self.centres].mean(axis=1)]))
+
+    def to_nodes(self, g: np.ndarray) -> np.ndarray:
+        """A gradient (or any additive quantity) on the collision vertices (n + q, k) gathered on the nodes."""
+        out = np.array(g[:self.n], float)
+        np.add.at(out, self.centres.reshape(-1), np.repeat(0.25 * g[self.n:], 4, axis=0))
+        return out
 
     def _collisions(self, x: np.ndarray):
         ipc = self.ipc
         c = ipc.NormalCollisions()
         c.use_area_weighting = True
         c.collision_set_type = ipc.NormalCollisions.CollisionSetType.IMPROVED_MAX_APPROX
-        c.build(self.mesh, np.ascontiguousarray(x), self.dhat)
+        c.build(self.mesh, x, self.dhat, 0.0, self.broad)
         return c
 
     def _potential(self):
@@ -90,52 +132,69 @@ class Barrier:
 
     def energy(self, u: np.ndarray) -> float:
         """E_c at displacement ``u`` (n, dim); inf where the surface passes through itself."""
-        x = self.X + u
-        if self.ipc.has_intersections(self.mesh, x):
+        x = self._vertices(self.X + u)
+        if self.ipc.has_intersections(self.mesh, x, self.broad):
             return math.inf
         return float(self._potential()(self._collisions(x), self.mesh, x))
 
-    def derivatives(self, u: np.ndarray, hessian: bool = True):
+    def _on_nodes(self, ids: np.ndarray):
+        """The entries (dim k,) of the k distinct nodes that collision vertices ``ids`` are made of, and the map
+        T (dim len(ids), dim k) from their displacements to the vertices'."""
+        terms = [(int(v), i, 1.0) if v < self.n else (int(m), i, 0.25)
+                 for i, v in enumerate(ids) for m in ([v] if v < self.n else self.centres[v - self.n])]
+        nodes = sorted({t[0] for t in terms})
+        where = {v: k for k, v in enumerate(nodes)}
+        P = np.zeros((len(ids), len(nodes)))
+        for node, i, c in terms:
+            P[i, where[node]] += c
+        entries = (self.dim * np.asarray(nodes)[:, None] + np.arange(self.dim)).reshape(-1)
+        return entries, np.kron(P, np.eye(self.dim))
+
+    def derivatives(self, u: np.ndarray, hessian: bool = True, project: bool = False):
         """(energy, gradient (n, dim), Hessian blocks [(entries, H)] over the pairs within reach: entry
-        dim i + c is node i's component c; empty without ``hessian``)."""
-        x = self.X + u
+        dim i + c is node i's component c; empty without ``hessian``; with ``project`` each pair's block
+        projected to positive semi-definite (its negative eigenvalues clamped to 0))."""
+        x = self._vertices(self.X + u)
         C = self._collisions(x)
         B = self._potential()
         energy = float(B(C, self.mesh, x))
-        grad = np.asarray(B.gradient(C, self.mesh, x)).reshape(-1, self.dim)
+        grad = self.to_nodes(np.asarray(B.gradient(C, self.mesh, x)).reshape(-1, self.dim))
         blocks = []
         if hessian:
             E, F = self.mesh.edges, self.mesh.faces
             for k in range(len(C)):
                 c = C[k]
                 ids = np.asarray(c.vertex_ids(E, F))
-                ids = ids[ids >= 0]
-                entries = (self.dim * ids[:, None] + np.arange(self.dim)).reshape(-1)
-                blocks.append((entries, np.asarray(B.hessian(c, c.dof(x, E, F)))))
+                entries, T = self._on_nodes(ids[ids >= 0])
+                method = self.ipc.PSDProjectionMethod.CLAMP if project else self.ipc.PSDProjectionMethod.NONE
+                blocks.append((entries, T.T @ np.asarray(B.hessian(c, c.dof(x, E, F), method)) @ T))
                 del c
         return energy, grad, blocks
 
     def pairs(self, u: np.ndarray):
-        """The nodes within the barrier's reach of another part of the surface at ``u`` and their least
-        distance: (nodes, distances)."""
-        x = self.X + u
+        """The nodes within the barrier's reach of another part of the surface at ``u`` (a centre's: its four
+        nodes) and their least distance: (nodes, distances)."""
+        x = self._vertices(self.X + u)
         C = self._collisions(x)
         E, F = self.mesh.edges, self.mesh.faces
-        best = np.full(len(self.X), np.inf)
+        best = np.full(self.n, np.inf)
         for k in range(len(C)):
             c = C[k]
             ids = np.asarray(c.vertex_ids(E, F))
             d = math.sqrt(max(float(c.compute_distance(c.dof(x, E, F))), 0.0))
-            for i in ids[ids >= 0]:
-                best[i] = min(best[i], d)
+            for v in ids[ids >= 0]:
+                for i in ([v] if v < self.n else self.centres[v - self.n]):
+                    best[i] = min(best[i], d)
             del c
         nodes = np.flatnonzero(np.isfinite(best))
         return nodes, best[nodes]
 
     def step_fraction(self, u0: np.ndarray, u1: np.ndarray) -> float:
         """The largest fraction of the straight path from ``u0`` to ``u1`` free of any crossing (continuous
-        collision detection), 1 when the whole path is."""
-        return float(self.ipc.compute_collision_free_stepsize(self.mesh, self.X + u0, self.X + u1))
+        collision detection; the centres move on straight paths too), 1 when the whole path is."""
+        return float(self.ipc.compute_collision_free_stepsize(self.mesh, self._vertices(self.X + u0),
+                                                              self._vertices(self.X + u1), 0.0, self.broad,
+                                                              self.ccd))
 
 
 class BarrierContact(GatheredSurface):
@@ -147,19 +206,23 @@ class BarrierContact(GatheredSurface):
 
     def __init__(self, problem, kappa: float):
         super().__init__(problem, kappa)
+        centres = None
         if self.dim == 2:
             edges, faces = np.asarray(self.facets, np.int64).reshape(-1, 2), None
         else:
-            faces = np.array([t for quad in self.facets for t in triangles(quad, self.X)], np.int64).reshape(-1, 3)
+            centres, faces = split(self.facets, self.X)
             edges = _ipctk().edges(faces.astype(np.int32))
         try:
-            self.barrier = Barrier(self.X, edges, faces, self.kappa * self._mu)
+            self.barrier = Barrier(self.X, edges, faces, self.kappa * self._mu, centres=centres)
         except ValueError as err:
             raise ValueError(f"stability.contact_energy = 'barrier': {err}; allowed there: 'penalty' (2D)") from err
 
     def order(self, facets: list[Facet]) -> list[Facet]:
-        """By the facet's reference nodes, sorted (lexicographic in x, y[, z])."""
-        return sorted(facets, key=lambda f: sorted(f.points))
+        """Each facet's nodes by their reference positions (lexicographic in x, y[, z]; the barrier needs no
+        orientation, and a quadrilateral's ring is found from its geometry: :func:`cyclic`), the facets by
+        their nodes: the nodes are numbered alike whatever vertex order a partition gives a facet."""
+        ordered = [Facet(*map(list, zip(*sorted(zip(f.dofs, f.points), key=lambda dp: dp[1])))) for f in facets]
+        return sorted(ordered, key=lambda f: f.points)
 
     def set_kappa(self, kappa: float) -> None:
         self.kappa = float(kappa)
@@ -177,7 +240,16 @@ class BarrierContact(GatheredSurface):
         return ContactTerms(energy, self.global_entries, grad.reshape(-1))
 
     def entry_blocks(self, owned_values) -> list:
+        """The exact Hessian's blocks (the stability criteria read its inertia)."""
         return self.barrier.derivatives(self.displacement(owned_values))[2]
+
+    def newton_blocks(self, owned_values) -> list:
+        """The blocks Newton's matrix takes: each pair's Hessian projected to positive semi-definite (incremental
+        potential contact's practice). The exact blocks' negative curvature (the distance's own, between an
+        edge pair or a point and a triangle) is no instability of the body, yet with it the minimizer shifted K
+        at every iteration of a fold closing in 3D and did not converge (the creasing plate one element wide:
+        2808 shifted factorizations and a failed step exact, 122 and the whole run projected, measured)."""
+        return self.barrier.derivatives(self.displacement(owned_values), project=True)[2]
 
     def step_fraction(self, owned_start, owned_step) -> float:
         """The fraction of the step ``owned_step`` (owned part of a mixed-space array, the iterate moving to

@@ -96,14 +96,22 @@ class MinimizingNewton(NewtonSolver):
             value = compat.assemble_scalar(self.energy_form, self.comm) + self.extra.objective(x.array_r)
             return value if math.isfinite(value) else OUTSIDE
 
-    def admissible(self) -> bool:
+    def admissible(self, start=None) -> bool:
         """Whether ``w`` (its Dirichlet values set) lies in Pi's domain: the objective there is finite (no
-        inverted cell; with contact, no node tunnelled through the surface). Same answer on every rank."""
+        inverted cell; with contact, no node tunnelled through the surface) and, with a barrier and the array
+        of the state it starts from (``start``), the straight path from there to ``w`` crosses no part of the
+        surface (a prediction can carry a whole fold through the other face, to a state without a crossing).
+        Same answer on every rank."""
         x = compat.function_vector(self.w)
         compat.set_dirichlet_values(x, self.bcs)
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         value = self._objective(self.snes, x)  # NaN (no contact term) or OUTSIDE outside the domain
-        return math.isfinite(value) and value < OUTSIDE
+        if not (math.isfinite(value) and value < OUTSIDE):
+            return False
+        if start is None or getattr(self.extra, "step_fraction", None) is None:
+            return True
+        owned = x.array_r
+        return self.extra.step_fraction(np.asarray(start)[:len(owned)], np.asarray(start)[:len(owned)] - owned) >= 1.0
 
     def energy(self, owned_values=None) -> float:
         """Pi at ``w`` (or at the owned values given, already in ``w``): the energy form plus the extra
@@ -280,6 +288,7 @@ class MinimizingNewton(NewtonSolver):
         ksp = snes.getKSP()
         dx = x.duplicate()
         reason, its, fnorm = failed.reason, 0, failed.residual_norm
+        self.exact_blocks = True  # near the minimizer: the exact Hessian, for Newton's quadratic convergence
         try:
             self._residual(snes, x, b)
             fnorm = b.norm()
@@ -302,6 +311,7 @@ class MinimizingNewton(NewtonSolver):
                     break
         finally:
             dx.destroy()
+            self.exact_blocks = False
         if its == 0:
             return failed
         converged = reason > 0 and math.isfinite(fnorm)

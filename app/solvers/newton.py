@@ -177,6 +177,7 @@ class NewtonSolver:
             u_is, q_is = self._field_index_sets(fields)
             ksp.getPC().setFieldSplitIS(("u", u_is), ("q", q_is))
         ksp.getPC().setFromOptions()
+        self.exact_blocks = False  # the extra term's exact Hessian even where it offers Newton blocks of its own
         if getattr(extra, "step_fraction", None) is not None:  # a barrier: every iterate stays free of crossings
             self.snes.setLineSearchPreCheck(self._step_filter)
             self.filtered_steps = 0
@@ -318,7 +319,11 @@ class NewtonSolver:
         with timing.timed("assembly"):
             compat.assemble_matrix_into(J, self.hessian_form, self.bcs)
             if self.extra is not None:
-                add_blocks(J, self.extra.entry_blocks(x.array_r), self.extra.global_entries, self._held)
+                # the term's Newton blocks where it has its own (the barrier's, projected to positive
+                # semi-definite pair by pair) until Newton is near the solution (``exact_blocks``), else its Hessian
+                blocks = self.extra.entry_blocks if self.exact_blocks else \
+                    getattr(self.extra, "newton_blocks", self.extra.entry_blocks)
+                add_blocks(J, blocks(x.array_r), self.extra.global_entries, self._held)
 
     def solve(self) -> NewtonResult:
         """Solve from the current ``w`` as initial guess; ``w`` holds the result."""

@@ -324,7 +324,7 @@ class TimeStepper:
         """Solve one step of size dt from the current state; returns (newton result, err)."""
         self.system.set_time(self.t + dt, dt)
         dQ_pred = self._predict(dt)
-        if self.minimizing and not self.solver.admissible():
+        if self.minimizing and not self.solver.admissible(self.system.state.x.array):
             # past a snap the last step's displacement rate, extrapolated, can invert cells (or carry a node
             # through the surface): the minimizer cannot start outside its energy's domain; the last state can
             self.inadmissible_predictions += 1
