@@ -1,8 +1,8 @@
 """Self-contact as a smooth barrier (incremental potential contact), the same code in 2D and 3D.
 
 The surface that can touch itself (:mod:`app.model.contact_surface`: segments in 2D, each hexahedron's
-quadrilateral facet cut into four triangles about its centre in 3D) carries the barrier of the IPC Toolkit (``ipctk``, pinned
-in scripts/requirements.txt) in its convergent form (Li et al.: each pair of surface primitives weighted by
+quadrilateral facet cut into four triangles about its centre in 3D) carries the barrier of the IPC Toolkit
+(``ipctk``, pinned in scripts/requirements.txt) in its convergent form (Li et al.: each pair of surface primitives weighted by
 its reference area, overlapping pairs corrected by the improved max approximator):
 
     E_c = kappa mu  sum_pairs  w_pair  b(d_pair) / d_hat,      b(d) = -(d - d_hat)^2 ln(d / d_hat)  (d < d_hat)
@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from app.model.contact_surface import ContactTerms, Facet, GatheredSurface
+from app.model.contact_surface import ContactTerms, Facet, GatheredSurface, connected_groups
 
 BARRIER_REACH = 0.05  # d_hat: this fraction of the shortest reference edge of the surface
 STEP_SAFETY = 0.9  # a Newton step starts at this fraction of the largest collision-free step
@@ -286,23 +286,7 @@ class BarrierContact(GatheredSurface):
                 "penetration_mm": 0.0}
 
     def _zones(self, nodes: np.ndarray) -> list[list[int]]:
-        inside = set(int(i) for i in nodes)
-        parent = {i: i for i in inside}
-
-        def find(i):
-            while parent[i] != i:
-                parent[i] = parent[parent[i]]
-                i = parent[i]
-            return i
-
-        for f in self.facets:
-            here = [int(i) for i in f if int(i) in inside]
-            for i in here[1:]:
-                parent[find(i)] = find(here[0])
-        groups: dict[int, list[int]] = {}
-        for i in inside:
-            groups.setdefault(find(i), []).append(i)
-        return sorted((sorted(g) for g in groups.values()), key=lambda g: g[0])
+        return connected_groups(set(int(i) for i in nodes), self.facets)
 
     def zone_summary(self, owned_values) -> list[dict]:
         """The contact zones of a state: each one's nodes' reference ranges (x, y[, z]) and area (2D: length)."""

@@ -40,7 +40,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from app.model.contact_surface import (CONTACT_ROLES, KAPPA_MAX, STIFFEN, ContactTerms, Facet,  # noqa: F401
-                                        GatheredSurface)
+                                        GatheredSurface, connected_groups)
 
 REACH = 0.5  # a point is paired with a segment it has passed by at most this times the segment's length
 OVERLAP = 1e-3  # the tunnel check: a segment's projection range [0, 1] widened by this at each end
@@ -330,32 +330,10 @@ class SelfContact:
         """The contact zones: groups of points in contact joined along the surface (a midpoint and its
         segment's ends, both in contact, on either face) and across it (a point and the segment it touches)."""
         n = len(self.X)
-        inside = set(int(i) for i in state.points)
-        parent = {i: i for i in inside}
-
-        def find(i):
-            while parent[i] != i:
-                parent[i] = parent[parent[i]]
-                i = parent[i]
-            return i
-
-        def join(i, j):
-            if i in parent and j in parent:
-                parent[find(i)] = find(j)
-
-        for j, (a, b) in enumerate(self.segments):
-            join(int(a), int(b))
-            join(int(a), n + j)
-            join(n + j, int(b))
-        for p, j in zip(state.points, state.segments):
-            for e in (*self.segments[j], n + j):
-                if int(e) not in parent:
-                    parent[int(e)] = int(e)
-                join(int(p), int(e))
-        groups: dict[int, list[int]] = {}
-        for i in inside:
-            groups.setdefault(find(i), []).append(i)
-        return sorted((sorted(g) for g in groups.values()), key=lambda g: g[0])
+        chains = ((int(a), int(b), n + j) for j, (a, b) in enumerate(self.segments))
+        bridges = ((int(p), *(int(e) for e in self.segments[j]), n + int(j))
+                   for p, j in zip(state.points, state.segments))
+        return connected_groups(set(int(i) for i in state.points), chains, bridges)
 
 
 # history.csv's columns with self-contact on (Problem.observables)

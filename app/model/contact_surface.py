@@ -25,6 +25,35 @@ STIFFEN = 10.0
 KAPPA_MAX = 1.0e6
 
 
+def connected_groups(inside, chains, bridges=()) -> list[list[int]]:
+    """The groups of the members ``inside`` joined by ``chains`` (each joins those of its elements that are
+    members) and then by ``bridges`` (each joins all its elements, adding those that are not members as links
+    only), each group sorted, the groups by their first member."""
+    parent = {int(i): int(i) for i in inside}
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    def join(elements):
+        elements = [int(e) for e in elements]
+        for e in elements[1:]:
+            parent[find(e)] = find(elements[0])
+
+    for chain in chains:
+        join([e for e in chain if int(e) in parent])
+    for bridge in bridges:
+        for e in bridge:
+            parent.setdefault(int(e), int(e))
+        join(bridge)
+    groups: dict[int, list[int]] = {}
+    for i in inside:
+        groups.setdefault(find(int(i)), []).append(int(i))
+    return sorted((sorted(g) for g in groups.values()), key=lambda g: g[0])
+
+
 @dataclass
 class ContactTerms:
     """A contact energy at one iterate, in the global numbering of the mixed space (the same on every rank):
