@@ -52,8 +52,9 @@ STABILITY: dict[str, Key] = {
                           "contact (2D and 3D; no state or iterate passes through the surface); auto: the penalty "
                           "in 2D, the barrier in 3D (docs/creases.md)"),
     "contact_stiffness": key(float, 1000.0, in_closed(10.0, 1.0e6),
-                             "the penalty's kappa (self-contact; a growing trial crease's mirror): interface "
-                             "stiffness kappa mu / h (penetration ~ p / (kappa mu) of an element)"),
+                             "self-contact's kappa (and a growing trial crease's mirror's): the penalty's interface "
+                             "stiffness kappa mu / h (penetration ~ p / (kappa mu) of an element), or the barrier's "
+                             "stiffness kappa mu"),
     "error_estimate": key(bool, True, None,
                           "estimate g_c's discretization error with two coarsened companion runs"),
 }
