@@ -2,8 +2,8 @@
 
 The surface that can touch itself (:mod:`app.model.contact_surface`: segments in 2D, each hexahedron's
 quadrilateral facet cut into four triangles about its centre in 3D) carries the barrier of the IPC Toolkit
-(``ipctk``, pinned in scripts/requirements.txt) in its convergent form (Li et al.: each pair of surface primitives weighted by
-its reference area, overlapping pairs corrected by the improved max approximator):
+(``ipctk``, pinned in scripts/requirements.txt) in its convergent form (Li et al.: each pair of surface
+primitives weighted by its reference area, overlapping pairs corrected by the improved max approximator):
 
     E_c = kappa mu  sum_pairs  w_pair  b(d_pair) / d_hat,      b(d) = -(d - d_hat)^2 ln(d / d_hat)  (d < d_hat)
 
@@ -17,7 +17,9 @@ detection finds free of any crossing (:meth:`BarrierContact.step_fraction`, scal
 has to be raised or can lock: the barrier holds the faces a distance below d_hat apart (at kappa 1000 and a
 contact pressure of mu, 0.99 d_hat), a fraction of an element that vanishes with the mesh.
 
-The Hessian is exact (no projection to positive semi-definite): the stability criteria read its inertia.
+Two Hessians: the stability criteria and the minimizer's final plain-Newton polish take the exact one
+(:meth:`BarrierContact.entry_blocks`, whose inertia the criteria read); Newton's matrix otherwise takes each
+pair's Hessian projected to positive semi-definite (:meth:`BarrierContact.newton_blocks`).
 What the fluid does in contact: nothing changes, as with the penalty (:mod:`app.model.contact`).
 """
 

@@ -108,10 +108,10 @@ class MinimizingNewton(NewtonSolver):
         value = self._objective(self.snes, x)  # NaN (no contact term) or OUTSIDE outside the domain
         if not (math.isfinite(value) and value < OUTSIDE):
             return False
-        if start is None or getattr(self.extra, "step_fraction", None) is None:
+        if start is None:
             return True
-        owned = x.array_r
-        return self.extra.step_fraction(np.asarray(start)[:len(owned)], np.asarray(start)[:len(owned)] - owned) >= 1.0
+        start = np.asarray(start)[:len(x.array_r)]
+        return self.collision_free(start, start - x.array_r) >= 1.0
 
     def energy(self, owned_values=None) -> float:
         """Pi at ``w`` (or at the owned values given, already in ``w``): the energy form plus the extra
@@ -256,10 +256,9 @@ class MinimizingNewton(NewtonSolver):
                 return False
             e0 = self._objective(snes, x)
             step = self.escape_length / vmax
-            if getattr(self.extra, "step_fraction", None) is not None:  # a barrier: no step through the surface
-                w.set(0.0)
-                w.axpy(-step, v)
-                step *= self.extra.step_fraction(x.array_r, w.array_r)
+            w.set(0.0)  # a barrier: no step through the surface
+            w.axpy(-step, v)
+            step *= self.collision_free(x.array_r, w.array_r)
             for _ in range(5):
                 trial.waxpy(step, v, x)
                 e = self._objective(snes, trial)
@@ -300,10 +299,7 @@ class MinimizingNewton(NewtonSolver):
                     its -= 1
                     break
                 ksp.solve(b, dx)
-                fraction = 1.0
-                if getattr(self.extra, "step_fraction", None) is not None:  # a barrier: no step through the surface
-                    fraction = self.extra.step_fraction(x.array_r, dx.array_r)
-                x.axpy(-fraction, dx)
+                x.axpy(-self.collision_free(x.array_r, dx.array_r), dx)  # a barrier: not through the surface
                 self._residual(snes, x, b)
                 fnorm = b.norm()
                 reason = self._converged(snes, its, (x.norm(), dx.norm(), fnorm))

@@ -180,17 +180,22 @@ class NewtonSolver:
         self.exact_blocks = False  # the extra term's exact Hessian even where it offers Newton blocks of its own
         if getattr(extra, "step_fraction", None) is not None:  # a barrier: every iterate stays free of crossings
             self.snes.setLineSearchPreCheck(self._step_filter)
-            self.filtered_steps = 0
+
+    def collision_free(self, start, step) -> float:
+        """The fraction of the update ``step`` from ``start`` (owned arrays; the iterate moves to start - step)
+        that crosses no part of the surface: the extra term's ``step_fraction`` (a barrier's continuous
+        collision detection), 1 without one."""
+        if getattr(self.extra, "step_fraction", None) is None:
+            return 1.0
+        return self.extra.step_fraction(start, step)
 
     def _step_filter(self, x, y, *args) -> None:
         """The line search's precheck with a barrier term: the update y (the iterate moves to x - lambda y,
-        lambda <= 1) is shortened to the part of it that continuous collision detection finds free of any
-        crossing of the surface (``extra.step_fraction``), so that no trial point of the line search lies
-        beyond the barrier, where its energy is not defined."""
-        fraction = self.extra.step_fraction(x.array_r, y.array_r)
+        lambda <= 1) is shortened to the part of it free of crossings (:meth:`collision_free`), so that no
+        trial point of the line search lies beyond the barrier, where its energy is not defined."""
+        fraction = self.collision_free(x.array_r, y.array_r)
         if fraction < 1.0:
             y.scale(fraction)
-            self.filtered_steps += 1
 
     @staticmethod
     def _iterative_options(rtol: float, max_it: int) -> dict:
