@@ -164,13 +164,27 @@ def test_a_plate_one_element_wide_creases_in_contact_as_the_plane_strain_layer(t
 TWO_RANKS = 1e-4
 
 
+def _slab(flat: dict) -> dict:
+    """``flat`` as a plate one element wide (rollers on both faces: plane strain)."""
+    plate = copy.deepcopy(flat)
+    plate["geometry"] = {"kind": "plate", "width": flat["mesh"]["element_size"], **plate["geometry"]}
+    return plate
+
+
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run in contact with a serial one")
-def test_a_crease_in_barrier_contact_is_the_same_on_1_and_2_ranks(tmp_path):
-    """The creasing layer with the barrier on 2 ranks against the same run on one (every rank alone): the same
-    steps, every column within TWO_RANKS of its scale, and the crease in the same place (the barrier has no
-    kinks: the penalty's symmetric crease may end in mirror images, tests/test_contact.py). Not compared: the
-    negative eigenvalue count, which differs at the first state in contact (a soft barrier's near-zero mode:
-    1 on one rank, 0 or 1 on two, measured; docs/creases.md)."""
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_crease_in_barrier_contact_is_the_same_on_1_and_2_ranks(tmp_path, dim):
+    """The creasing layer with the barrier on 2 ranks against the same run on one (every rank alone), in 2D and
+    as the plate one element wide in 3D: the same steps, every column within TWO_RANKS of its scale, and the
+    crease in the same place (the barrier has no kinks: the penalty's symmetric crease may end in mirror images,
+    tests/test_contact.py). Not compared: the negative eigenvalue count, which differs at the first state in
+    contact (a soft barrier's near-zero mode: 1 on one rank, 0 or 1 on two, measured; docs/creases.md).
+
+    In 3D the fold is a snap from a state with 21 directions of negative curvature (the switch comes past the
+    layer's surface instability, where short waves across the slab go unstable too): it takes 90-100 minimizing
+    iterations, more than one solve's limit on 2 ranks (a solve that runs out while descending goes on:
+    MinimizingNewton's snap rounds), and which minimizer it reaches depends on the roundoff, so the parts of
+    the mesh must go to the same ranks every run (compat: SCOTCH_PTHREAD_NUMBER)."""
     from pathlib import Path
 
     from conftest import read_csv
@@ -180,7 +194,7 @@ def test_a_crease_in_barrier_contact_is_the_same_on_1_and_2_ranks(tmp_path):
 
     comm = MPI.COMM_WORLD
     base = Path(comm.bcast(str(tmp_path) if comm.rank == 0 else None))
-    cfg = config.resolve(CREASING, ["stability.contact_energy=barrier"])
+    cfg = config.resolve(CREASING if dim == 2 else _slab(CREASING), ["stability.contact_energy=barrier"])
     dist = simulate(cfg, base / "dist", comm, progress=False)
     serial = simulate(cfg, tmp_path / f"serial{comm.rank}", MPI.COMM_SELF, progress=False)
     assert dist["status"] == serial["status"] == "buckled"
@@ -197,6 +211,7 @@ def test_a_crease_in_barrier_contact_is_the_same_on_1_and_2_ranks(tmp_path):
                 assert rb[k] == ra[k] or not np.isfinite(float(rb[k]))
                 continue
             worst[k] = max(worst.get(k, 0.0), abs(float(ra[k]) - float(rb[k])) / scale)
+    print(f"{dim}D, 1 vs 2 ranks, worst per column:", worst)
     assert max(worst.values()) <= TWO_RANKS, worst
     first, ref = dict(dist["creases"]["first_contact"]), dict(serial["creases"]["first_contact"])
     assert first.pop("growth_mm") == pytest.approx(ref.pop("growth_mm"), rel=TWO_RANKS)

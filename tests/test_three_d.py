@@ -13,7 +13,8 @@
 - The plate and tube on 1 and 2 ranks, and a checkpoint resumed: the same run.
 - The surface's wave-vector measures on analytic fields, and the lattice on Pythagorean triples.
 - Past the onset: competing branches of a double onset (mirror images, squares, energy below the unbuckled
-  path), on 1 and 2 ranks and resumed; the pattern rules and the overhang test on analytic fields.
+  path), on 1 and 2 ranks and resumed; the overhang test on an analytic field (the pattern rules:
+  tests/test_patterns.py).
 """
 
 from __future__ import annotations
@@ -279,31 +280,6 @@ def test_a_3d_tube_buckles_within_its_error_bar_of_the_polar_1d_minimum_also_on_
     assert fine["mesh"]["elements_along_axis"] == 2 * summary["mesh"]["elements_along_axis"]
     g = fine["critical"]["growth_um"]
     assert abs(g - c["growth_um"]) <= bar and abs(g - r["growth_um"]) <= bar, (g, c["growth_um"], bar)
-
-
-def _plate_grid(L: float = 0.3, W: float = 0.2, nx: int = 30, nz: int = 20):
-    x, z = np.meshgrid(np.linspace(0, L, nx + 1), np.linspace(0, W, nz + 1), indexing="ij")
-    return np.column_stack([x.ravel(), z.ravel()]), x.ravel(), z.ravel(), L, W
-
-
-@pytest.mark.parametrize("field, pattern", [
-    (lambda x, z, L, W: np.cos(4 * math.pi * x / L), "stripes"),
-    (lambda x, z, L, W: np.cos(3 * math.pi * x / L) * np.cos(2 * math.pi * z / W), "checkerboard"),
-    (lambda x, z, L, W: np.cos(3 * math.pi * x / L) + 0.9 * np.cos(2 * math.pi * z / W), "squares"),
-    (lambda x, z, L, W: sum(np.cos(m * math.pi * x / L) * np.cos(n * math.pi * z / W)
-                            for m, n in ((3, 1), (2, 2), (1, 3), (3, 2), (2, 3), (4, 1))), "labyrinth"),
-    (lambda x, z, L, W: np.cos(3 * math.pi * x / L) + 1.5 * np.cos(3 * math.pi * x / L) * np.cos(2 * math.pi * z / W),
-     "mixed"),
-])
-def test_the_pattern_of_an_analytic_surface(field, pattern):
-    """Each rule of classify_pattern on its textbook field (plus a uniform swelling): one stripe shape, one
-    cos x cos z, two orthogonal stripe sets, six shapes of equal weight, a stripe with a stronger cos x cos z of its own x-wave."""
-    from app.model.surface import PlaneSurface, classify_pattern, surface_spectrum
-
-    pos, x, z, L, W = _plate_grid()
-    spectrum = surface_spectrum(PlaneSurface(), pos, 0.3 + field(x, z, L, W))
-    assert classify_pattern(spectrum) == pattern
-    assert sum(f for _, _, f in spectrum) == pytest.approx(1.0, rel=1e-9)  # cos x cos shapes are a basis
 
 
 def test_an_overhanging_surface_is_found_where_it_turns_over():

@@ -331,7 +331,7 @@ class ResultWriter:
         """After a followed branch: the surface profiles themselves, profiles.npz (growth, time, position and
         profile of every step on the branch; :class:`app.model.surface.SurfaceProfiles`), and wrinkles.png
         and amplitude.png if plots are written (collective, like :meth:`plot_history`). In 3D (``shape``: a
-        surface, with ``patterns``, :func:`app.model.surface.branch_patterns`) pattern.png replaces
+        surface, with ``patterns``, :func:`app.model.patterns.branch_patterns`) pattern.png replaces
         wrinkles.png: the surface from above at those states."""
         if not profiles:
             return

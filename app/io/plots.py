@@ -111,7 +111,7 @@ def mode_map_plot(profile, crossing, path, axes=("x [mm]", "z [mm]"), wave_label
 
 def pattern_plot(profiles, patterns: list[dict], shape, path) -> None:
     """A followed 3D branch seen from above at the states of ``patterns``
-    (:func:`app.model.surface.branch_patterns`): the surface's detrended normal displacement as a colour map,
+    (:func:`app.model.patterns.branch_patterns`): the surface's detrended normal displacement as a colour map,
     each panel titled with its growth, pattern and strongest shapes (a passage is shown unrolled)."""
     import numpy as np
 

@@ -207,8 +207,8 @@ def plane_modes(position: np.ndarray, profile: np.ndarray) -> tuple[np.ndarray, 
     expanded in cos(m pi a / La) cos(n pi b / Lb), the shapes a rectangle with sides on rollers allows:
     (energy (M + 1, N + 1), the fraction of the profile's squared norm in each (m, n)), trapezoidal weights,
     m and n up to the grid's Nyquist number. ``ValueError`` if the nodes are not a tensor grid."""
-    a, b, f = _on_grid(position, profile)
-    wa, wb = _trapezoid(a), _trapezoid(b)
+    a, b, f = on_grid(position, profile)
+    wa, wb = trapezoid_weights(a), trapezoid_weights(b)
     ca = np.cos(np.pi * np.outer(np.arange(len(a)), (a - a[0]) / (a[-1] - a[0])))  # (m, node)
     cb = np.cos(np.pi * np.outer(np.arange(len(b)), (b - b[0]) / (b[-1] - b[0]))) if len(b) > 1 else np.ones((1, 1))
     wb = wb if len(b) > 1 else np.ones(1)
@@ -219,7 +219,7 @@ def plane_modes(position: np.ndarray, profile: np.ndarray) -> tuple[np.ndarray, 
     return energy, np.array([a[-1] - a[0], b[-1] - b[0]])
 
 
-def _trapezoid(x: np.ndarray) -> np.ndarray:
+def trapezoid_weights(x: np.ndarray) -> np.ndarray:
     if len(x) < 2:
         return np.ones(1)
     h = np.diff(x)
@@ -295,7 +295,7 @@ class PlaneSurface(SurfaceShape):
         return overhang(coords, disp, ia, ib, (len(ua), len(ub)))
 
 
-def _periodic_weights(theta: np.ndarray) -> np.ndarray:
+def periodic_weights(theta: np.ndarray) -> np.ndarray:
     """Trapezoidal weights of sorted angles on a closed circle (they sum to 2 pi)."""
     gaps = np.diff(np.concatenate([theta, [theta[0] + 2 * np.pi]]))
     return 0.5 * (gaps + np.roll(gaps, 1))
@@ -306,8 +306,8 @@ def cylinder_modes(position: np.ndarray, profile: np.ndarray) -> np.ndarray:
     the axis) expanded in cos / sin(n theta) cos(m pi z / L_z), the shapes a tube with its ends on rollers
     allows: the fraction of the profile's squared norm in each (n, m) (cos and sin of one n together),
     n up to the ring's Nyquist number, m to the axis'. ``ValueError`` if the nodes are not a tensor grid."""
-    th, z, f = _on_grid(position, profile, (9, 12))
-    wt, wz = _periodic_weights(th), _trapezoid(z)
+    th, z, f = on_grid(position, profile, (9, 12))
+    wt, wz = periodic_weights(th), trapezoid_weights(z)
     n = np.arange(len(th) // 2 + 1)
     e = np.exp(-1j * np.outer(n, th))  # (n, node around)
     cz = np.cos(np.pi * np.outer(np.arange(len(z)), (z - z[0]) / (z[-1] - z[0]))) if len(z) > 1 else np.ones((1, 1))
@@ -396,7 +396,7 @@ def _grid_axes(a: np.ndarray, b: np.ndarray, digits: tuple[int, int] = (12, 12))
     return np.searchsorted(ua, np.round(a, digits[0])), np.searchsorted(ub, np.round(b, digits[1])), ua, ub
 
 
-def _on_grid(position: np.ndarray, profile: np.ndarray, digits: tuple[int, int] = (12, 12)):
+def on_grid(position: np.ndarray, profile: np.ndarray, digits: tuple[int, int] = (12, 12)):
     """(the grid's first-axis values, its second-axis values, the profile as an array over them) of a profile
     on a tensor grid of nodes (``position``: (N, 2)); ``ValueError`` if the nodes are not one."""
     ia, ib, a, b = _grid_axes(position[:, 0], position[:, 1], digits)
@@ -483,7 +483,7 @@ class MeanRadial(GrowthMeasure):
                 at = z == zr
                 _, radial, weights, _ = around_profile(coords[at, :2], disp[at, :2], centre=(0.0, 0.0))
                 means.append(-np.sum(weights * radial) / np.sum(weights))
-            wz = _trapezoid(rings)
+            wz = trapezoid_weights(rings)
             return float(np.dot(wz, means) / wz.sum())
 
         return growth
@@ -616,94 +616,3 @@ class SurfaceProfiles:
         return cls([float(g) for g in arrays["growth_mm"]], [float(t) for t in arrays["time"]],
                    [np.array(p, float) for p in arrays["position"]],
                    [np.array(p, float) for p in arrays["profile"]], bool(closed))
-
-
-# --- the pattern on a followed 3D branch -------------------------------------------------------------------
-
-PATTERN_MULTIPLES = (1.1, 1.25, 1.5, 2.0)  # growth / g_c of the states a 3D branch's pattern is reported at
-DOMINANT = 0.6  # a single shape (or an orthogonal pair) holding this fraction of the surface's squared norm
-
-
-def surface_spectrum(shape: SurfaceShape, position: np.ndarray, profile: np.ndarray) -> list[tuple[int, int, float]]:
-    """A 3D surface profile's shapes (i, j, fraction of its squared norm), strongest first: (m, n) half-waves
-    along x and z on a plate (:func:`plane_modes`), (n around, m along the axis) on a passage
-    (:func:`cylinder_modes`)."""
-    if shape.name == "cylinder":
-        energy = cylinder_modes(position, profile)
-    else:
-        energy, _ = plane_modes(position, profile)
-    uniform, energy[0, 0] = energy[0, 0], 0.0
-    if uniform < 1.0:  # fractions of the profile's non-uniform part
-        energy /= 1.0 - uniform
-    order = np.argsort(energy, axis=None)[::-1]
-    i, j = np.unravel_index(order, energy.shape)
-    return [(int(a), int(b), float(energy[a, b])) for a, b in zip(i, j)]
-
-
-def shape_coefficient(shape: SurfaceShape, position: np.ndarray, profile: np.ndarray, i: int, j: int) -> float:
-    """The signed projection of a 3D surface profile on one of its shapes: cos(i pi x / L) cos(j pi z / W) on a
-    plate, cos(i theta) cos(j pi z / L_z) on a passage (the profile's inner product with it over the shape's
-    own, trapezoidal weights)."""
-    if shape.name == "cylinder":
-        a, b, f = _on_grid(position, profile, (9, 12))
-        wa = _periodic_weights(a)
-        phi_a = np.cos(i * a)
-    else:
-        a, b, f = _on_grid(position, profile)
-        wa = _trapezoid(a)
-        phi_a = np.cos(np.pi * i * (a - a[0]) / (a[-1] - a[0]))
-    wb = _trapezoid(b)
-    phi_b = np.cos(np.pi * j * (b - b[0]) / (b[-1] - b[0])) if len(b) > 1 else np.ones(1)
-    return float((wa * phi_a) @ f @ (wb * phi_b) / (((phi_a ** 2) @ wa) * ((phi_b ** 2) @ wb)))
-
-
-def classify_pattern(spectrum: list[tuple[int, int, float]]) -> str:
-    """The pattern a 3D surface's spectrum describes (docs/three-d.md, "Past the onset"):
-
-    - ``stripes``: one shape with a zero index holds >= DOMINANT of the profile (crests parallel to a side;
-      on a passage, n > 0, m = 0: crests along the axis; n = 0: rings);
-    - ``checkerboard``: one shape with both indices non-zero holds >= DOMINANT (cos x cos z: bumps and dimples
-      alternating);
-    - ``squares``: two orthogonal stripe shapes (i, 0) and (0, j), each at least half the other, hold >=
-      DOMINANT together (cos x + cos z);
-    - ``labyrinth``: four or more shapes are needed to reach DOMINANT (no wave vector dominates);
-    - ``mixed``: anything else (two or three shapes that are not an orthogonal pair, e.g. a herringbone's
-      stripes and their modulation)."""
-    if not spectrum or spectrum[0][2] <= 0.0:
-        return "flat"
-    (i1, j1, f1) = spectrum[0]
-    if f1 >= DOMINANT:
-        return "stripes" if i1 == 0 or j1 == 0 else "checkerboard"
-    (i2, j2, f2) = spectrum[1] if len(spectrum) > 1 else (0, 0, 0.0)
-    pair = {(i1 == 0), (j1 == 0)} == {True, False} and {(i2 == 0), (j2 == 0)} == {True, False} and (i1 == 0) != (i2 == 0)
-    if pair and f1 + f2 >= DOMINANT and f2 >= 0.5 * f1:
-        return "squares"
-    cumulative = np.cumsum([f for _, _, f in spectrum])
-    needed = int(np.searchsorted(cumulative, DOMINANT)) + 1
-    return "labyrinth" if needed >= 4 else "mixed"
-
-
-def branch_patterns(profiles: SurfaceProfiles, shape: SurfaceShape, g_c_mm: float | None) -> list[dict]:
-    """The pattern of a followed 3D branch at the first states past PATTERN_MULTIPLES x g_c and at its last
-    state: growth, time, pattern (:func:`classify_pattern`), amplitude (half the peak-to-trough of the detrended
-    profile) and the four strongest shapes with their fractions."""
-    if not len(profiles) or shape.surface_dim != 2:
-        return []
-    picks = []
-    if g_c_mm:
-        for k in PATTERN_MULTIPLES:
-            i = next((i for i, g in enumerate(profiles.growth_mm) if g >= k * g_c_mm), None)
-            if i is not None and i not in picks:
-                picks.append(i)
-    last = len(profiles) - 1
-    if last not in picks:
-        picks.append(last)
-    out = []
-    for i in picks:
-        prof = profiles.profile[i]
-        spectrum = surface_spectrum(shape, profiles.position[i], prof)
-        out.append({"growth_mm": profiles.growth_mm[i], "time": profiles.time[i],
-                    "growth_over_g_c": profiles.growth_mm[i] / g_c_mm if g_c_mm else None,
-                    "pattern": classify_pattern(spectrum), "amplitude_mm": 0.5 * float(np.ptp(prof)),
-                    "shapes": [[a, b, f] for a, b, f in spectrum[:4]]})
-    return out

@@ -122,10 +122,11 @@ class BranchSwitcher:
     def combined(self, crossing) -> np.ndarray:
         """The onset's mode the switch adds: the first eigenmode as computed (``modes`` "1"), or for each wave
         vector (i, j) of ``modes`` the combination of the modes crossing together whose surface is closest to
-        the pure shape (i, j) (:func:`app.model.surface.shape_coefficient`: the combination weighted by each
+        the pure shape (i, j) (:func:`app.model.patterns.shape_coefficient`: the combination weighted by each
         mode's coefficient on it), scaled to unit surface amplitude, and these summed. A shape the crossing
         modes do not contain (less than half of it) is left out, with a log line."""
-        from app.model.surface import shape_coefficient, shape_of, surface_spectrum
+        from app.model.patterns import shape_coefficient, surface_spectrum
+        from app.model.surface import shape_of
 
         p = self.p
         if not self.modes:

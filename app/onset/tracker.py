@@ -249,7 +249,8 @@ class OnsetTracker:
             "switches": [w.as_dict() for w in self.branch.switches],
             "branch_crossings": [x.as_dict() for x in self.crossings[1:]],
             "restabilized": list(self.restabilized),
-            "minimizer": {k: solver.get(k, 0) for k in ("shifted_factorizations", "saddles", "polishes", "escapes")}
+            "minimizer": {k: solver.get(k, 0) for k in ("shifted_factorizations", "saddles", "polishes", "escapes",
+                                                           "snap_rounds")}
             | {"energy_rejections": st.energy_rejections,
                "inadmissible_predictions": st.inadmissible_predictions}}}
 

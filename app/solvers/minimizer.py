@@ -43,6 +43,7 @@ SHIFT_MAX = 1e6  # beyond this the direction is a scaled gradient step already
 # outside, gives a NaN step length after three cuts, and a NaN never compares below the minimum step
 OUTSIDE = 1e20
 ITERATION_FACTOR = 4  # escaping a saddle may take more iterations than an ordinary step
+SNAP_ROUNDS = 4  # a solve that left a saddle and ran out of iterations still descending goes on, up to this x
 ESCAPES = 3  # negative-curvature steps per solve (MinimizingNewton._escape)
 INVERSE_ITERATIONS = 30  # inverse iterations with the shifted factor for a direction of negative curvature
 
@@ -75,6 +76,7 @@ class MinimizingNewton(NewtonSolver):
         self.saddles = 0  # solves that converged with negative pivots left
         self.polishes = 0
         self.escapes = 0  # negative-curvature steps (all solves)
+        self.snap_rounds = 0  # solves continued past their iteration limit while descending from a saddle
         # how far a negative-curvature step moves the farthest node [mm]: the branch's imperfection (set by
         # the stepper); None: no such steps
         self.escape_length: float | None = None
@@ -188,6 +190,19 @@ class MinimizingNewton(NewtonSolver):
             return NewtonResult(False, 0, int(PETSc.SNES.ConvergedReason.DIVERGED_FUNCTION_DOMAIN), float("nan"))
         res = super().solve()
         reason = PETSc.SNES.ConvergedReason
+        rounds = 1
+        while (not res.converged and res.reason == reason.DIVERGED_MAX_IT and self.last.shifted
+               and rounds < SNAP_ROUNDS and self._descending()):
+            # a snap: the solve left a saddle (it shifted K) and was still lowering the energy when its
+            # iterations ran out. A shorter time step does not help (the state it starts from is the same
+            # saddle, and the way down to the next minimizer as long): the descent goes on from its last iterate
+            its = res.iterations
+            rounds += 1
+            self.snap_rounds += 1
+            self._sync_solution(self.x)
+            res = super().solve()
+            res = dataclasses.replace(res, iterations=res.iterations + its)
+            self.last_iterations = res.iterations
         if not res.converged and res.reason == reason.DIVERGED_LINE_SEARCH:
             res = self._polish(res)
         elif res.converged and res.reason == reason.CONVERGED_SNORM_RELATIVE and res.residual_norm > self._ttol:
@@ -211,6 +226,13 @@ class MinimizingNewton(NewtonSolver):
             if self.last.negatives:
                 self.saddles += 1
         return res
+
+    def _descending(self) -> bool:
+        """The last iterate of a failed solve lies inside Pi's domain and below the energy the solve started
+        from (by more than roundoff)."""
+        e = self._objective(self.snes, self.x)
+        a = self.last.energy_start
+        return bool(math.isfinite(e) and e < OUTSIDE and e < a - 1e-12 * max(1.0, abs(a)))
 
     def _escape(self) -> bool:
         """One step from the last iterate along a direction of negative curvature of K, downhill: x += a v
@@ -325,7 +347,8 @@ class MinimizingNewton(NewtonSolver):
 
     def counters(self) -> dict:
         return {**super().counters(), "sigma": self.sigma, "shifted_factorizations": self.shifted_factorizations,
-                "saddles": self.saddles, "polishes": self.polishes, "escapes": self.escapes}
+                "saddles": self.saddles, "polishes": self.polishes, "escapes": self.escapes,
+                "snap_rounds": self.snap_rounds}
 
     def set_counters(self, c: dict) -> None:
         super().set_counters(c)
@@ -333,6 +356,7 @@ class MinimizingNewton(NewtonSolver):
         self.shifted_factorizations = c.get("shifted_factorizations", 0)
         self.saddles, self.polishes = c.get("saddles", 0), c.get("polishes", 0)
         self.escapes = c.get("escapes", 0)
+        self.snap_rounds = c.get("snap_rounds", 0)
 
 
 def energy_decreased(verdict: MinimizerVerdict) -> bool:

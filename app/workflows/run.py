@@ -16,7 +16,8 @@ from app.io.output import OutputSettings, ResultWriter, versions
 from app.io.writes import ResultWriteError
 from app.model.contact import COLUMNS as CONTACT_COLUMNS
 from app.model.problem import Problem
-from app.model.surface import SurfaceProfiles, branch_patterns, shape_of, surface_profile
+from app.model.patterns import branch_patterns
+from app.model.surface import SurfaceProfiles, shape_of, surface_profile
 from app.onset.branching import reference_length
 from app.onset.contact import contact_summary
 from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
