@@ -127,11 +127,9 @@ def test_a_plate_one_element_wide_creases_in_contact_as_the_plane_strain_layer(t
     from app.workflows.run import simulate
 
     flat_cfg = config.resolve(CREASING, ["stability.contact_energy=barrier"])
-    plate = copy.deepcopy(CREASING)
     width = CREASING["mesh"]["element_size"]
-    plate["geometry"] = {"kind": "plate", "width": width, **plate["geometry"]}
     flat = simulate(flat_cfg, tmp_path / "2d", MPI.COMM_SELF, progress=False)
-    slab = simulate(config.resolve(plate, []), tmp_path / "3d", MPI.COMM_SELF, progress=False)
+    slab = simulate(config.resolve(_slab(CREASING), []), tmp_path / "3d", MPI.COMM_SELF, progress=False)
     assert slab["creases"]["contact"] == flat["creases"]["contact"] == "barrier"
     assert slab["critical"]["time"] == pytest.approx(flat["critical"]["time"], rel=1e-8)
     a, b = read_csv(tmp_path / "2d" / "history.csv"), read_csv(tmp_path / "3d" / "history.csv")
@@ -160,8 +158,13 @@ def test_a_plate_one_element_wide_creases_in_contact_as_the_plane_strain_layer(t
 
 # the barrier's states on 1 and 2 ranks differ beyond roundoff: near d_hat the barrier is soft (b'' -> 0 there),
 # so the contact state is ill-conditioned and the parallel roundoff moves it (measured: amplitude 7.5e-5 of its
-# scale, growth 1.2e-6, energy 4e-9). The penalty's agree to 1e-8 (tests/test_contact.py)
+# scale, growth 1.2e-6, energy 4e-9 on one of the two layouts PT-Scotch gave with threads; 2e-13 on Debian 12
+# and 1e-9 on Debian 13 on the one it gives on one thread, app/compat.py). The penalty's agree to 1e-8
+# (tests/test_contact.py)
 TWO_RANKS = 1e-4
+# the plate one element wide in 3D: its state in contact is better conditioned on this case (measured 3.5e-8,
+# Debian 13 1.9e-8); a descent to the other minimizer from the snap's saddle (no contact) is far outside
+TWO_RANKS_SLAB = 1e-6
 
 
 def _slab(flat: dict) -> dict:
@@ -175,8 +178,8 @@ def _slab(flat: dict) -> dict:
 @pytest.mark.parametrize("dim", [2, 3])
 def test_a_crease_in_barrier_contact_is_the_same_on_1_and_2_ranks(tmp_path, dim):
     """The creasing layer with the barrier on 2 ranks against the same run on one (every rank alone), in 2D and
-    as the plate one element wide in 3D: the same steps, every column within TWO_RANKS of its scale, and the
-    crease in the same place (the barrier has no kinks: the penalty's symmetric crease may end in mirror images,
+    as the plate one element wide in 3D: the same steps, every column within TWO_RANKS (3D: TWO_RANKS_SLAB) of
+    its scale, and the crease in the same place (the barrier has no kinks: the penalty's symmetric crease may end in mirror images,
     tests/test_contact.py). Not compared: the negative eigenvalue count, which differs at the first state in
     contact (a soft barrier's near-zero mode: 1 on one rank, 0 or 1 on two, measured; docs/creases.md).
 
@@ -212,7 +215,8 @@ def test_a_crease_in_barrier_contact_is_the_same_on_1_and_2_ranks(tmp_path, dim)
                 continue
             worst[k] = max(worst.get(k, 0.0), abs(float(ra[k]) - float(rb[k])) / scale)
     print(f"{dim}D, 1 vs 2 ranks, worst per column:", worst)
-    assert max(worst.values()) <= TWO_RANKS, worst
+    tol = TWO_RANKS if dim == 2 else TWO_RANKS_SLAB
+    assert max(worst.values()) <= tol, worst
     first, ref = dict(dist["creases"]["first_contact"]), dict(serial["creases"]["first_contact"])
-    assert first.pop("growth_mm") == pytest.approx(ref.pop("growth_mm"), rel=TWO_RANKS)
+    assert first.pop("growth_mm") == pytest.approx(ref.pop("growth_mm"), rel=tol)
     assert first == ref  # the same time, strain and place

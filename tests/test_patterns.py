@@ -7,6 +7,7 @@ known by construction:
   triangle wave tri of slope +-1 across bands (so the wave vectors are exactly (cos t, +-sin t) k in
   alternating bands), at several angles t and band directions, and a smoothly zigzagging one; the two
   directions are found at +-t;
+- bent stripes on small plates (Swift-Hohenberg, 4 and 6 wavelengths wide) are not herringbones;
 - labyrinths grown by the Swift-Hohenberg equation (u_t = eps u - (k^2 + lap)^2 u / k^4 - u^3 from noise, with
   mirror sides as a rollered plate's, by cosine transforms): stripes of one wavelength meandering in every
   direction, the textbook labyrinth; and target rings (stripes in every direction by construction);
@@ -94,12 +95,13 @@ def _classified(pos, field):
     return classify_pattern(spectrum, texture), texture
 
 
-@pytest.mark.parametrize("angle, bands", [(20, 0), (35, 0), (50, 0), (65, 0), (40, 30)])
+@pytest.mark.parametrize("angle, bands", [(35, 0), (50, 0), (65, 0), (40, 30), (50, 90)])
 def test_a_herringbone_is_told_apart_and_its_two_wave_vectors_found(angle, bands):
     """A herringbone built from its definition, at several angles between its arms and the bands, on a plate 8
     wavelengths wide: classified herringbone, its two directions at bands +- angle (within 6 degrees: the
     window blurs each wall over a third of a wavelength; measured 5.7 at worst), each holding half the
-    surface, its walls along the bands."""
+    surface, its walls along the bands (measured within 1.7 degrees). Arms closer than about 20 degrees to the
+    bands (35 degrees apart as measured) are read as wavy stripes (ARMS_APART), as bent stripes are."""
     pos, x, z = _square()
     pattern, texture = _classified(pos, herringbone(x, z, angle, bands))
     assert pattern == "herringbone", texture
@@ -107,7 +109,7 @@ def test_a_herringbone_is_told_apart_and_its_two_wave_vectors_found(angle, bands
     expected = sorted(((bands + s * angle + 90.0) % 180.0) - 90.0 for s in (1, -1))
     assert np.allclose(found, expected, atol=6.0), (found, expected)
     assert min(texture.shares) > 0.45  # measured 0.48 at least
-    assert abs((texture.wall_angle - bands + 90.0) % 180.0 - 90.0) < 3.0, texture.wall_angle
+    assert abs((texture.wall_angle - bands + 90.0) % 180.0 - 90.0) < 2.5, texture.wall_angle
 
 
 def test_a_smoothly_zigzagging_stripe_is_a_herringbone():
@@ -119,6 +121,19 @@ def test_a_smoothly_zigzagging_stripe_is_a_herringbone():
     pattern, texture = _classified(pos, np.cos(k * x + (k / q) * np.cos(q * z)))
     assert pattern == "herringbone", texture
     assert np.allclose(sorted(np.abs(texture.directions)), [45.0, 45.0], atol=15.0), texture.directions
+
+
+@pytest.mark.parametrize("wavelengths", [4, 6])
+def test_swift_hohenberg_stripes_on_small_plates_are_not_herringbones(wavelengths):
+    """Swift-Hohenberg stripes on plates 4 and 6 wavelengths wide, 30 seeds each: bent stripes in a few domains
+    whose directions are 20-40 degrees apart, some with walls near a bisector. None is a herringbone (before
+    ARMS_APART and WALL_ALIGNED were set, 6 of 30 on the 4-wavelength plate were, measured)."""
+    L = wavelengths * WAVELENGTH
+    n = 16 * wavelengths + 1
+    x, z = np.meshgrid(np.linspace(0, L, n), np.linspace(0, L, n), indexing="ij")
+    pos = np.column_stack([x.ravel(), z.ravel()])
+    found = [seed for seed in range(30) if _classified(pos, swift_hohenberg(L, n, seed))[0] == "herringbone"]
+    assert not found, found
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -145,23 +160,30 @@ def test_target_rings_are_a_labyrinth_and_a_checkerboard_is_not_striped():
     assert texture.coherence < 0.1 and not texture.herringbone
 
 
-@pytest.mark.parametrize("name", ["one fold", "two grains", "oblique stripes", "stripes"])
-def test_what_is_not_a_herringbone(name):
-    """Two stripe directions are not enough: one fold has two domains; two grains of orthogonal stripes have
-    their wall across a bisector (45 degrees off); oblique stripes reflected at the rollered sides hold a
-    second direction only in thin strips along the sides."""
+@pytest.mark.parametrize("name, pattern", [("one fold", "mixed"), ("two grains", "mixed"),
+                                           ("grain bands", "mixed"), ("oblique stripes", "mixed"),
+                                           ("stripes", "stripes")])
+def test_what_is_not_a_herringbone(name, pattern):
+    """Two stripe directions are not enough: one fold has two domains; two grains of orthogonal stripes, and
+    four alternating bands of them, have their walls across a bisector (45 degrees off); oblique stripes
+    reflected at the rollered sides hold a second direction only in thin strips along the sides (one
+    direction: resultant near 1, so not a labyrinth either)."""
     pos, x, z = _square()
     k = 2 * math.pi / WAVELENGTH
     field = {"one fold": np.cos(k * math.cos(0.7) * x + k * math.sin(0.7) * np.abs(z - 0.2)),
              "two grains": np.where(x < 0.2, np.cos(k * x), np.cos(k * z)),
+             "grain bands": np.where(np.mod(x, 0.2) < 0.1, np.cos(k * x), np.cos(k * z)),
              "oblique stripes": np.cos(k * (x * math.cos(0.6) + z * math.sin(0.6))),
              "stripes": np.cos(k * x)}[name]
-    pattern, texture = _classified(pos, field)
-    assert pattern != "herringbone" and not texture.herringbone, texture
-    if name == "two grains":
-        assert texture.wall_offset == pytest.approx(45.0, abs=3.0) and texture.domains == 2
+    found, texture = _classified(pos, field)
+    assert found == pattern, texture
+    if name in ("two grains", "grain bands"):
+        assert texture.wall_offset == pytest.approx(45.0, abs=3.0)
+        assert texture.domains == (2 if name == "two grains" else 4)
     if name == "one fold":
         assert texture.domains == 2 and texture.wall_offset < 3.0  # a herringbone's wall, but only one
+    if name == "oblique stripes":
+        assert texture.resultant > 0.9
 
 
 def test_the_texture_of_a_passage_is_not_computed_and_a_graded_grid_is_resampled():
@@ -177,3 +199,25 @@ def test_the_texture_of_a_passage_is_not_computed_and_a_graded_grid_is_resampled
     x, zz = np.meshgrid(a, b, indexing="ij")
     pattern, texture = _classified(np.column_stack([x.ravel(), zz.ravel()]), herringbone(x, zz, 50))
     assert pattern == "herringbone", texture
+
+
+def _unequal_zigzag(z: np.ndarray, period: float, narrow: float) -> np.ndarray:
+    """Slope +1 over the wide part of each period and -1 over the narrow one: crests zigzagging with unequal
+    arms (continuous, drifting with z)."""
+    u, n = np.mod(z, period), np.floor(z / period)
+    wide = period - narrow
+    return n * (wide - narrow) + np.where(u < wide, u, wide - (u - wide))
+
+
+@pytest.mark.parametrize("narrow, pattern", [(1.0, "mixed"), (1.5, "herringbone")])
+def test_a_zigzag_with_one_short_arm_is_a_herringbone_only_when_both_arms_hold_enough(narrow, pattern):
+    """Crests at +-45 degrees in bands of unequal width (4 wavelengths a period, the narrow band ``narrow``
+    wavelengths): with the narrow arm at 16% of the surface (measured) the stripes merely kink, below
+    CLUSTER_SHARE; at 33% it is a herringbone with unequal arms."""
+    pos, x, z = _square()
+    k = 2 * math.pi / WAVELENGTH
+    t = math.radians(45)
+    field = np.cos(k * math.cos(t) * x + k * math.sin(t) * _unequal_zigzag(z, 4 * WAVELENGTH, narrow * WAVELENGTH))
+    found, texture = _classified(pos, field)
+    assert found == pattern, texture
+    assert texture.wall_offset < 1.0 and texture.domains == 4  # the walls and domains of a zigzag either way

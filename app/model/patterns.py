@@ -6,7 +6,7 @@ Two views, because neither alone tells the patterns apart:
 - the **spectrum** (:func:`surface_spectrum`): the whole surface's squared norm in cos x cos shapes. One shape
   or an orthogonal pair of them names stripes, a checkerboard or squares;
 - the **texture** (:func:`surface_texture`): the structure tensor of the surface's slope, averaged over a window
-  of half the pattern's wavelength, gives at each point how striped the surface is there (the coherence, 1 for
+  of a third of the pattern's wavelength, gives at each point how striped the surface is there (the coherence, 1 for
   stripes, 0 for a checkerboard's bumps) and the local wave vector's direction. A herringbone is striped
   everywhere with its wave vectors in two directions, in domains whose walls run along a bisector of the two
   (the crests pass the wall unbroken); a labyrinth is striped everywhere with its wave vectors in every
@@ -30,7 +30,9 @@ STRIPED = 0.5  # a surface whose slope-weighted mean coherence reaches this is s
 TIGHT = 0.9  # a direction cluster whose doubled-angle resultant reaches this is one wave vector (about +-13 deg)
 CLUSTER_SHARE = 0.2  # each of a herringbone's two directions holds at least this share of the striped surface
 SPREAD = 0.5  # a striped surface whose doubled-angle resultant is below this has no preferred direction
-WALL_ALIGNED = 10.0  # degrees: a herringbone's domain walls lie within this of a bisector of its wave vectors
+WALL_ALIGNED = 5.0  # degrees: a herringbone's domain walls lie within this of a bisector of its wave vectors
+ARMS_APART = 35.0  # degrees: a herringbone's two wave vectors at least this far apart (closer: wavy or bent stripes)
+FLAT = 1e-12  # a surface whose non-uniform part holds less than this fraction of its squared norm is flat
 WINDOW = 1.0 / 3.0  # the structure tensor's Gaussian window: this fraction of the pattern's wavelength
 
 
@@ -43,7 +45,9 @@ def surface_spectrum(shape: SurfaceShape, position: np.ndarray, profile: np.ndar
     else:
         energy, _ = plane_modes(position, profile)
     uniform, energy[0, 0] = energy[0, 0], 0.0
-    if uniform < 1.0:  # fractions of the profile's non-uniform part
+    if not np.all(np.isfinite(energy)) or uniform >= 1.0 - FLAT:
+        energy[:] = 0.0  # a flat surface (or one at roundoff about its mean): no shape at all
+    else:  # fractions of the profile's non-uniform part
         energy /= 1.0 - uniform
     order = np.argsort(energy, axis=None)[::-1]
     i, j = np.unravel_index(order, energy.shape)
@@ -98,13 +102,13 @@ class Texture:
 
     @property
     def herringbone(self) -> bool:
-        """Striped, two tight directions (each holding CLUSTER_SHARE, at least 20 degrees from either the same or
-        the orthogonal one: a herringbone's arms are neither parallel nor a grid), three or more domains, walls
-        along a bisector (the crests cross them unbroken)."""
+        """Striped, two tight directions (each holding CLUSTER_SHARE) at least ARMS_APART apart (closer ones are
+        wavy or bent stripes), three or more domains, walls within WALL_ALIGNED of a bisector of the two
+        directions (the crests cross them unbroken)."""
         between = abs(self.directions[0] - self.directions[1]) % 180.0
         between = min(between, 180.0 - between)
         return (self.striped and min(self.shares) >= CLUSTER_SHARE and min(self.tightness) >= TIGHT
-                and 20.0 <= between <= 160.0 and self.domains >= 3
+                and between >= ARMS_APART and self.domains >= 3
                 and self.wall_offset is not None and self.wall_offset <= WALL_ALIGNED)
 
     @property
@@ -171,7 +175,7 @@ def surface_texture(shape: SurfaceShape, position: np.ndarray, profile: np.ndarr
 
     The profile is extended evenly across each side (a rollered side is a mirror: the shapes it allows are even
     about it) and its slope g taken by central differences; the structure tensor J = <g g^T> is its Gaussian
-    average with a standard deviation of half the pattern's wavelength (:func:`pattern_wavelength`), long
+    average with a standard deviation of a third of the pattern's wavelength (:func:`pattern_wavelength`), long
     enough to average a checkerboard's two slopes into an isotropic J and short enough to keep a herringbone's
     domains apart. At each node the coherence is (l1 - l2) / (l1 + l2) of J's eigenvalues and the wave vector
     J's leading eigenvector; the means are weighted by the slope (tr J), the directions by slope x coherence."""
@@ -183,6 +187,8 @@ def surface_texture(shape: SurfaceShape, position: np.ndarray, profile: np.ndarr
     from scipy import ndimage
 
     spectrum = spectrum if spectrum is not None else surface_spectrum(shape, position, profile)
+    if not spectrum or spectrum[0][2] <= 0.0 or not np.all(np.isfinite(f)):
+        return None  # flat: no texture
     lengths = (a[-1] - a[0], b[-1] - b[0])
     wavelength = pattern_wavelength(spectrum, lengths)
     a, b, f = _resampled(a, b, f)

@@ -178,6 +178,7 @@ class MinimizingNewton(NewtonSolver):
         """Minimize Pi from the current ``w`` (its Dirichlet values set first, so that every iterate is
         admissible and the energies compare); ``w`` holds the result, :attr:`last` the verdict."""
         self.last = MinimizerVerdict()
+        self._ttol = None  # set by this solve's first Newton iteration; a resumed round keeps it
         x = compat.function_vector(self.w)
         compat.set_dirichlet_values(x, self.bcs)
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
@@ -190,19 +191,18 @@ class MinimizingNewton(NewtonSolver):
             return NewtonResult(False, 0, int(PETSc.SNES.ConvergedReason.DIVERGED_FUNCTION_DOMAIN), float("nan"))
         res = super().solve()
         reason = PETSc.SNES.ConvergedReason
-        rounds = 1
+        rounds, round_start = 1, self.last.energy_start
         while (not res.converged and res.reason == reason.DIVERGED_MAX_IT and self.last.shifted
-               and rounds < SNAP_ROUNDS and self._descending()):
-            # a snap: the solve left a saddle (it shifted K) and was still lowering the energy when its
-            # iterations ran out. A shorter time step does not help (the state it starts from is the same
+               and rounds < SNAP_ROUNDS):
+            # a snap: the solve left a saddle (it shifted K) and its iterations ran out while the round still
+            # lowered the energy. A shorter time step does not help (the state it starts from is the same
             # saddle, and the way down to the next minimizer as long): the descent goes on from its last iterate
-            its = res.iterations
-            rounds += 1
+            end = self._objective(self.snes, self.x)
+            if not (math.isfinite(end) and end < OUTSIDE and end < round_start - 1e-12 * max(1.0, abs(round_start))):
+                break
+            rounds, round_start = rounds + 1, end
             self.snap_rounds += 1
-            self._sync_solution(self.x)
-            res = super().solve()
-            res = dataclasses.replace(res, iterations=res.iterations + its)
-            self.last_iterations = res.iterations
+            res = self._resumed(res)
         if not res.converged and res.reason == reason.DIVERGED_LINE_SEARCH:
             res = self._polish(res)
         elif res.converged and res.reason == reason.CONVERGED_SNORM_RELATIVE and res.residual_norm > self._ttol:
@@ -214,11 +214,7 @@ class MinimizingNewton(NewtonSolver):
             # a saddle the line search cannot leave: its residual is mostly in stiff directions and the
             # energy along K_sigma^-1 R falls below roundoff, while K is indefinite. A step along a direction
             # of negative curvature leaves it; then Newton again from there
-            its = res.iterations
-            self._sync_solution(self.x)
-            res = super().solve()
-            res = dataclasses.replace(res, iterations=res.iterations + its)
-            self.last_iterations = res.iterations
+            res = self._resumed(res)
             if not res.converged and res.reason == reason.DIVERGED_LINE_SEARCH:
                 res = self._polish(res)
         if res.converged:
@@ -227,12 +223,20 @@ class MinimizingNewton(NewtonSolver):
                 self.saddles += 1
         return res
 
-    def _descending(self) -> bool:
-        """The last iterate of a failed solve lies inside Pi's domain and below the energy the solve started
-        from (by more than roundoff)."""
-        e = self._objective(self.snes, self.x)
-        a = self.last.energy_start
-        return bool(math.isfinite(e) and e < OUTSIDE and e < a - 1e-12 * max(1.0, abs(a)))
+    def _resumed(self, res: NewtonResult) -> NewtonResult:
+        """Newton again from the last iterate (after an escape step, or for another round of a snap), converged
+        by the first round's tolerance (rtol times the step's initial residual, not the larger residual met on
+        the way down); the iterations add up."""
+        its = res.iterations
+        self._sync_solution(self.x)
+        self.keep_tolerance = True
+        try:
+            res = super().solve()
+        finally:
+            self.keep_tolerance = False
+        res = dataclasses.replace(res, iterations=res.iterations + its)
+        self.last_iterations = res.iterations
+        return res
 
     def _escape(self) -> bool:
         """One step from the last iterate along a direction of negative curvature of K, downhill: x += a v

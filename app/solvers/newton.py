@@ -165,6 +165,8 @@ class NewtonSolver:
         self._tol = (settings.rtol, settings.atol, 100 * settings.max_it)
         self.residual_scale = None  # the initial residual norm of the first solve: the problem's scale
         self.floor_accepted = 0  # solves accepted by the roundoff-floor rule (see _converged)
+        self.keep_tolerance = False  # the next solve keeps the last one's tolerance (MinimizingNewton._resumed)
+        self._ttol = self._rnorm0 = None  # this solve's convergence tolerance and initial residual (_converged)
         self.snes = PETSc.SNES().create(comm)
         self.snes.setOptionsPrefix(self.prefix)
         self.snes.setFunction(self._residual, self.b)
@@ -272,7 +274,7 @@ class NewtonSolver:
         xnorm, _, fnorm = norms
         ynorm = self._update_norm(it)
         rtol, atol, max_funcs = self._tol
-        if it == 0:
+        if it == 0 and not (self.keep_tolerance and self._ttol is not None):  # a solve resumed from a failed one
             self._ttol, self._rnorm0 = fnorm * rtol, fnorm
             if self.residual_scale is None and np.isfinite(fnorm) and fnorm > 0:
                 self.residual_scale = float(fnorm)
