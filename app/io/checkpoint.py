@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,6 +45,7 @@ import numpy as np
 
 from app import compat, config
 from app.geometry import dofmaps
+from app.io import writes
 
 FILE = "checkpoint.npz"
 FORMAT = 1
@@ -266,14 +266,6 @@ class DofLayout:
 # --- writing ---------------------------------------------------------------------------------------
 
 
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, tuple):
-        return list(o)
-    raise TypeError(f"cannot store {type(o).__name__} in a checkpoint")
-
-
 class _Sink:
     """Rank 0's zip file; collects the first error instead of raising (the gathers must go on)."""
 
@@ -357,16 +349,13 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, pr
                     "current": current, "stepper": stepper.counters(), "tracker": tracker_meta, "rows": rows,
                     "profiles_closed": bool(profiles.closed) if profiles else False,
                     "contact": {"kappa": contact.kappa, "raised": contact.raised} if contact is not None else None}
-            sink.put("meta", np.frombuffer(json.dumps(meta, default=_json_default).encode(), dtype=np.uint8))
+            sink.put("meta", np.frombuffer(writes.json_text(meta, exact=True, indent=None).encode(), dtype=np.uint8))
         except (TypeError, ValueError) as err:
             sink.error = sink.error or err
         sink.close()
         if sink.error is None:
             try:
-                with open(tmp, "rb") as f:
-                    os.fsync(f.fileno())
-                os.replace(tmp, final)
-                _fsync_dir(final.parent)
+                writes.commit(tmp, final)
                 size = float(final.stat().st_size)
             except OSError as err:
                 sink.error = err
@@ -379,17 +368,6 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, pr
     return size
 
 
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def remove(outdir, comm) -> None:

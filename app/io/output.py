@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
-import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,22 +57,11 @@ def versions() -> dict:
             "slepc": v(SLEPc), "gmsh": gmsh.__version__, "ipctk": ipc}
 
 
-def _clean(value):
-    """JSON-safe: NaN/inf become None."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    return value
-
-
 def rewrite_summary(outdir, comm, summary: dict) -> None:
     """Write summary.json (rank 0, atomically); collective, so every rank may read it afterwards. A
     :class:`~app.io.writes.ResultWriteError` on every rank if it cannot be written."""
     path = Path(outdir) / "summary.json"
-    writes.on_rank0(comm, path, lambda: writes.write_text(path, json.dumps(_clean(summary), indent=2) + "\n"))
+    writes.on_rank0(comm, path, writes.write_json, path, summary)
 
 
 @dataclass(frozen=True)
@@ -154,7 +141,7 @@ class ResultWriter:
             for row in rows:
                 aside.append(self._row_text(row))
             aside.close()
-            os.replace(tmp, path)
+            writes.commit(tmp, path)
         except BaseException:
             aside.close()
             tmp.unlink(missing_ok=True)

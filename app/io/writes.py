@@ -5,7 +5,10 @@ errors").
 Rank 0 writes the text files alone (history.csv, summary.json, config.toml, the plots,
 mode_surface.csv, the tables of study, converge and bench): :func:`on_rank0` runs such a write there and
 broadcasts its outcome, so every rank raises the same :class:`ResultWriteError` or none. Whole files are
-written aside and renamed (:func:`replace_file`): a failed write leaves the previous file, or none.
+written aside and renamed (:func:`replace_file`, or :func:`aside` and :func:`commit` for a file written in
+several collective parts, a checkpoint): a failed write leaves the previous file, or none, and a renamed
+file is on the disk (synced before and after the rename). Every JSON file goes through :func:`json_text`:
+standard JSON for results (NaN and infinities as null), Python's exact round trip for checkpoints.
 Rows are appended with :class:`RowFile`, which cuts a row that did not fit back off: history.csv stays
 valid CSV.
 
@@ -19,8 +22,12 @@ them fails there, with the file system's own error, before any rank enters HDF5.
 from __future__ import annotations
 
 import errno
+import json
+import math
 import os
-from pathlib import Path
+from pathlib import Path, PurePath
+
+import numpy as np
 
 SPACE_PROBE = ".hydrobuckle-space"  # the scratch file :func:`space_problem` allocates and removes
 
@@ -72,18 +79,42 @@ def at(path, write, *args, **kwargs):
 
 
 def replace_file(path, write) -> None:
-    """Write a whole file aside (``write(tmp_path)``), then rename it over ``path``: a failed write leaves
-    the previous file (or none) and no partial one. The aside name keeps the suffix (matplotlib reads the
-    format from it). A ``write`` that writes nothing leaves ``path`` as it was."""
+    """Write a whole file aside (``write(tmp_path)``), then :func:`commit` it over ``path``: a failed write
+    leaves the previous file (or none) and no partial one. The aside name keeps the suffix (matplotlib reads
+    the format from it). A ``write`` that writes nothing leaves ``path`` as it was."""
     path = Path(path)
     tmp = aside(path)
     try:
         write(tmp)
         if tmp.exists():  # a writer may have nothing to write (a gallery without modes)
-            os.replace(tmp, path)
+            commit(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def commit(tmp, path) -> None:
+    """Rename the whole file ``tmp`` over ``path``, durably: ``tmp``'s data reach the disk before the rename
+    and the directory's entry after it, so a crash leaves the old file or the new one, whole. ``tmp`` must
+    be closed; an error leaves ``tmp`` for the caller to remove."""
+    with open(tmp, "rb") as f:
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    sync_directory(Path(path).parent)
+
+
+def sync_directory(path) -> None:
+    """fsync a directory (its entries); where the file system cannot, nothing."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def aside(path) -> Path:
@@ -95,6 +126,41 @@ def aside(path) -> Path:
 def write_text(path, text: str) -> None:
     """A whole text file, by :func:`replace_file`."""
     replace_file(path, lambda tmp: Path(tmp).write_text(text))
+
+
+def json_safe(value, exact: bool = False):
+    """``value`` as plain JSON types: numpy scalars and arrays as numbers and lists, tuples as lists, paths as
+    strings. Not ``exact`` (a result file): NaN and infinities become None, so any JSON reader takes the
+    file. ``exact`` (a checkpoint): they stay floats, for Python's round trip. Anything else is a TypeError
+    naming its type."""
+    if isinstance(value, dict):
+        return {str(k): json_safe(v, exact) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v, exact) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist(), exact)
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, PurePath):
+        return str(value)
+    if isinstance(value, float):
+        return value if exact or math.isfinite(value) else None
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    raise TypeError(f"cannot write {type(value).__name__} as JSON")
+
+
+def json_text(value, exact: bool = False, indent: int | None = 2) -> str:
+    """The one JSON writer (:func:`json_safe`, then ``json.dumps``): a result file's text ends with a
+    newline and is standard JSON; ``exact`` keeps NaN and infinities (a checkpoint's, read back by
+    Python)."""
+    text = json.dumps(json_safe(value, exact), indent=indent, allow_nan=exact)
+    return text if exact else text + "\n"
+
+
+def write_json(path, value) -> None:
+    """A whole result file of JSON (:func:`json_text`), by :func:`replace_file`."""
+    write_text(path, json_text(value))
 
 
 class RowFile:

@@ -10,9 +10,10 @@ written at that time, all pointing into the same ``.h5`` datasets.
 
 from __future__ import annotations
 
-import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
+
+from app.io import writes
 
 
 def rearrange(path: str | Path, name: str) -> int:
@@ -55,7 +56,7 @@ def rearrange(path: str | Path, name: str) -> int:
             f.write(b'<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n')
             ET.ElementTree(out).write(f, encoding="utf-8", xml_declaration=False)
             f.write(b"\n")
-        os.replace(tmp, path)
+        writes.commit(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)  # the file as it was (a full disk: no partial copy left)
         raise
@@ -95,7 +96,6 @@ class FieldSeries:
         try:
             self._collective([create, lambda: self._file.write_mesh(domain)], compat.xdmf_mesh_bytes(domain))
         except Exception:
-            from app.io import writes
 
             writes.release(comm, self.ballast)
             raise
@@ -113,7 +113,7 @@ class FieldSeries:
         """Run the HDF5 ``actions`` on every rank, after reserving their space (unless ``data_bytes`` is
         None), and agree on the outcome of each before the next: a rank that failed must not leave the
         others inside the next one's collectives (measured: a hang when they agreed only after all)."""
-        from app.io import hdf5, writes
+        from app.io import hdf5
 
         size0 = self.h5.stat().st_size if self.comm.rank == 0 and self.h5.is_file() else 0
         if data_bytes is not None:
@@ -140,7 +140,7 @@ class FieldSeries:
             self._grown = max(0, self.h5.stat().st_size - size0)
 
     def _abandon(self) -> None:
-        from app.io import hdf5, writes
+        from app.io import hdf5
 
         if self._file is not None:
             hdf5.abandon(self._file)
@@ -158,12 +158,10 @@ class FieldSeries:
         self._rearrange()
 
     def _rearrange(self) -> None:
-        from app.io import writes
 
         writes.on_rank0(self.comm, self.path, rearrange, self.path, self.name)
 
     def close(self) -> None:
-        from app.io import writes
 
         if self._file is not None:
             writes.release(self.comm, self.ballast)
@@ -175,7 +173,6 @@ class FieldSeries:
         return self
 
     def __exit__(self, *exc):
-        from app.io import writes
 
         try:
             self.close()

@@ -459,7 +459,7 @@ def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], out
             result = run_bench(sizes, overrides, outdir, comm, baseline, only, error_estimate)
             if result is not None and json_only:  # a launch of `bench --ranks`: for the launching process
                 path = Path(json_only)
-                writes.on_rank0(comm, path, writes.write_text, path, json.dumps(result))
+                writes.on_rank0(comm, path, writes.write_text, path, writes.json_text(result, exact=True))
                 return ""
             doc = None if result is None else report({comm.size: result})
     if doc is None:
@@ -469,8 +469,8 @@ def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], out
 
     def files():
         writes.at(outdir, outdir.mkdir, parents=True, exist_ok=True)
-        for name, content in (("bench.json", json.dumps(doc, indent=2)), ("bench.md", text)):
-            writes.at(outdir / name, writes.write_text, outdir / name, content + "\n")
+        writes.at(outdir / "bench.json", writes.write_json, outdir / "bench.json", doc)
+        writes.at(outdir / "bench.md", writes.write_text, outdir / "bench.md", text + "\n")
 
     writes.on_rank0(comm, outdir, files)  # every rank may read bench.json once the command returns
     return text

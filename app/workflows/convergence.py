@@ -22,7 +22,6 @@ writes what ran with ``"status": "interrupted"`` and no estimate (convergence.md
 from __future__ import annotations
 
 import csv
-import json
 import math
 import time
 from pathlib import Path
@@ -253,7 +252,7 @@ def _write(outdir: Path, rows: list[dict], report: dict) -> None:
         lines.append(f"\nbase: g_c = {b['g_c_um']:.4f} um, converged estimate {b['converged_estimate_um']:.4f} um, "
                      f"estimated error {b['error_estimate_um']:.4f} um")
     files = {"convergence.csv": table,
-             "convergence.json": lambda tmp: tmp.write_text(json.dumps({"rows": rows, **report}, indent=2) + "\n"),
+             "convergence.json": lambda tmp: tmp.write_text(writes.json_text({"rows": rows, **report})),
              "convergence.md": lambda tmp: tmp.write_text("\n".join(lines) + "\n")}
     if report["status"] == "complete":
         files["convergence.png"] = lambda tmp: convergence_plot(rows, report, tmp)

@@ -9,11 +9,11 @@ mesh refined), the time-extrapolated value with an error bar from both differenc
 from __future__ import annotations
 
 import csv
-import json
 import time
 from pathlib import Path
 
 from app import config, factory, logging_setup
+from app.io import writes
 from app.reduced.solve import Estimate, Interrupted, Settings
 from app.reduced.transient import Resolution, TransientFailed
 
@@ -230,7 +230,7 @@ def run(cfg: dict, outdir: Path, stop=None) -> dict:
     outdir.mkdir(parents=True, exist_ok=True)
     for name in OUTPUTS:
         (outdir / name).unlink(missing_ok=True)
-    (outdir / "config.toml").write_text(config.dumps(cfg))
+    writes.write_text(outdir / "config.toml", config.dumps(cfg))
     block = compute(cfg, stop=stop)
     est = block.pop("_estimate")
     _write_margin(outdir / "margin.csv", est)
@@ -242,13 +242,13 @@ def run(cfg: dict, outdir: Path, stop=None) -> dict:
     except ImportError:  # pragma: no cover - matplotlib is a dependency
         pass
     summary = {"status": "buckled" if block["kind"] != "stable" else "stable", "solver": SOLVER, "reduced": block}
-    (outdir / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+    writes.write_json(outdir / "summary.json", summary)
     return summary
 
 
 def write_failure(outdir: Path, cfg: dict, message: str) -> None:
     summary = {"status": "failed", "solver": SOLVER, "error": message}
-    (outdir / "summary.json").write_text(json.dumps(summary, indent=2))
+    writes.write_json(outdir / "summary.json", summary)
 
 
 def _write_margin(path: Path, est: Estimate) -> None:

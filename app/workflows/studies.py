@@ -14,7 +14,6 @@ from __future__ import annotations
 import copy
 import csv
 import json
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -315,17 +314,11 @@ def run_study(cases: list[Case], outdir: Path, comm, title: str, param: str, ran
 
     def tables():
         write_tables(rows, outdir, title, param)
-        text = json.dumps({"title": title, "parameter": param, "rows": rows}, indent=2, default=_json_default)
-        writes.at(outdir / "study.json", writes.write_text, outdir / "study.json", text + "\n")
+        doc = {"title": title, "parameter": param, "rows": rows}
+        writes.at(outdir / "study.json", writes.write_json, outdir / "study.json", doc)
 
     writes.on_rank0(comm, outdir, tables)
     return comm.bcast(rows, root=0)
-
-
-def _json_default(o):
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    return str(o)
 
 
 def outcome(rows: list[dict], outdir: Path) -> tuple[bool, str]:
