@@ -169,24 +169,6 @@ def kind_defaults() -> dict:
     return {k.name: {"geometry": k.defaults(), "mesh": dict(k.mesh_defaults)} for k in _kinds()}
 
 
-def __getattr__(name: str):
-    """Names computed from the registries: SCHEMA, GEOMETRY_KINDS, KIND_DEFAULTS, KIND_GEOMETRY_KEYS,
-    MATERIAL_KEYS, LOADING_KINDS."""
-    if name == "SCHEMA":
-        return schema()
-    if name == "MATERIAL_KEYS":
-        return material_keys()
-    if name == "GEOMETRY_KINDS":
-        return _kinds().names()
-    if name == "KIND_DEFAULTS":
-        return kind_defaults()
-    if name == "KIND_GEOMETRY_KEYS":
-        return {k.name: set(k.keys) for k in _kinds()}
-    if name == "LOADING_KINDS":
-        return _loadings().names()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 def leaves(table: dict | None = None, prefix: str = ""):
     """Every key of ``table`` (default: the whole :func:`schema`) as (dotted name, :class:`~app.schema.Key`),
     in the order a resolved config lists them (the docs' reference page, the bad-input sweep)."""

@@ -1,4 +1,4 @@
-"""Bad input, generated from the schema: every key of app.config.SCHEMA (the geometry keys of each kind,
+"""Bad input, generated from the schema: every key of app.config.schema() (the geometry keys of each kind,
 the material, film and loading keys built from the registries included) gets wrong-type values and values
 just outside each documented bound (all rejected by config.resolve with a ConfigError naming the key), and
 the closed ends of its range (accepted). One case per table also goes through ``hydrobuckle run``: exit 2,
@@ -38,7 +38,7 @@ COMPANIONS = {
 def _spec_contexts():
     """(dotted key, spec, base user config) for every key; a geometry key once for every kind that
     uses it, with that kind's own spec."""
-    sch = config.SCHEMA
+    sch = config.schema()
     for dotted, spec in config.leaves(sch):
         if dotted.startswith("geometry.") and dotted != "geometry.kind":
             name = dotted.split(".", 1)[1]
@@ -126,7 +126,7 @@ BAD, GOOD = _cases()
 
 def test_the_sweep_covers_every_key():
     keys = {d for _, d, _, _ in _spec_contexts()}
-    assert keys == {d for d, _ in config.leaves(config.SCHEMA)}
+    assert keys == {d for d, _ in config.leaves(config.schema())}
     assert {d for _, d, _ in BAD} == keys  # every key has at least a wrong-type case
     assert len(BAD) >= 200 and len(GOOD) >= 30, (len(BAD), len(GOOD))
 

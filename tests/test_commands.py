@@ -2,7 +2,7 @@
 options film_grading and the quadrature degrees; user .msh files with more materials; the scripts.
 
 References: Richardson extrapolation of synthetic sequences g_h = g* + C h^p (exact g* and p); the
-refinement rules of app/convergence.py written out (tolerance / 4, dt / 2, h / 2 and film layers x 2
+refinement rules of app/workflows/convergence.py written out (tolerance / 4, dt / 2, h / 2 and film layers x 2
 per level) and the element sizes measured on the built meshes; each level's own summary.json (the
 study tables must repeat it); meshes read back with gmsh; config round trips; a case run alone (1
 rank) or on 2 ranks; the paper's trend of g_c with the modulus ratio; the geometric film heights of

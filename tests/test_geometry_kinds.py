@@ -11,13 +11,12 @@ from app.schema import ConfigError, gt, key
 
 
 def test_every_registered_kind_is_in_the_schema_with_its_defaults():
-    assert config.GEOMETRY_KINDS == geometry.KINDS.names() == ("bilayer", "tube", "elliptic-tube", "plate", "tube-3d",
-                                                                         "elliptic-tube-3d", "msh",
-                                                                         "msh-3d")
-    table = config.SCHEMA["geometry"]
+    assert geometry.KINDS.names() == ("bilayer", "tube", "elliptic-tube", "plate", "tube-3d", "elliptic-tube-3d",
+                                      "msh", "msh-3d")
+    table = config.schema()["geometry"]
     assert table["kind"].default == geometry.DEFAULT_KIND
     for kind in geometry.KINDS:
-        assert config.KIND_DEFAULTS[kind.name] == {"geometry": kind.defaults(), "mesh": kind.mesh_defaults}
+        assert config.kind_defaults()[kind.name] == {"geometry": kind.defaults(), "mesh": kind.mesh_defaults}
         for name, spec in kind.keys.items():
             assert name in table and table[name].type is spec.type and table[name].default is None
             assert spec.doc
@@ -72,7 +71,7 @@ def toy():
 
 
 def test_a_registered_kind_is_accepted_by_config(toy):
-    assert "toy-slab" in config.GEOMETRY_KINDS
+    assert "toy-slab" in geometry.KINDS.names()
     cfg = config.resolve({"geometry": {"kind": "toy-slab"}})
     assert cfg["geometry"]["span"] == 0.1 and cfg["mesh"]["element_size"] == 0.025
     assert cfg["geometry"]["length"] is None
@@ -95,7 +94,7 @@ def test_a_registered_kind_is_accepted_by_config(toy):
 def test_unregistered_kind_leaves_the_schema(toy):
     geometry.KINDS.unregister(toy.name)
     try:
-        assert "span" not in config.SCHEMA["geometry"]
+        assert "span" not in config.schema()["geometry"]
         with pytest.raises(ConfigError, match="geometry.kind"):
             config.resolve({"geometry": {"kind": "toy-slab"}})
     finally:

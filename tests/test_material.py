@@ -128,9 +128,9 @@ def test_one_parameter_declaration_feeds_config_record_and_summary():
     assert cfg["material"]["law"] is None and config.law(cfg) is HYDROGEL  # unset: the default law
     assert config.law(config.resolve({"material": {"law": "hydrogel"}})) is HYDROGEL
     for name, key in HYDROGEL.params.items():
-        assert config.SCHEMA["material"][name] is key
+        assert config.schema()["material"][name] is key
         assert cfg["material"][name] == key.default
-        assert config.SCHEMA["material"]["film"][name].default is None
+        assert config.schema()["material"]["film"][name].default is None
         assert key.doc and key.check is not None
     assert [f.name for f in dataclasses.fields(Hydrogel)] == list(HYDROGEL.params)
     mat = HYDROGEL.material(config.substrate_parameters(cfg))

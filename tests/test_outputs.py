@@ -1,4 +1,4 @@
-"""Result files (app/output.py ResultWriter) and the closed-form references (app/theory.py).
+"""Result files (app/io/output.py ResultWriter) and the closed-form references (app/model/theory.py).
 
 References: the files an earlier run left in the directory (a new run must remove its result files
 and nothing else); mode.xdmf/mode.h5 read back through PETSc's HDF5 viewer (mode_surface.csv must

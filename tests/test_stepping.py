@@ -1,4 +1,5 @@
-"""Time stepping (app/stepping.py) and crossings located within one step (app/onset.py, app/run.py).
+"""Time stepping (app/solvers/stepping.py) and crossings located within one step (app/onset/crossing.py,
+app/onset/tracker.py).
 
 References: the fixed time grid written out by hand; the step-size controller's formula
 dt_next = dt * clamp(0.9 sqrt(tol/err), 0.2, 2) (docs/model.md, "Time stepping"); the documented cut-back

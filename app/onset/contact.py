@@ -1,10 +1,12 @@
 """Where the model ends on a buckled branch: the surface folding onto itself, or an element inverting.
 
-The model has no contact: once wrinkles fold into a crease, the permeable surface passes through itself
-and the states that follow mean nothing. Nor can a cell with det F <= 0 be represented (the energy's
-ln J is undefined there). A run that follows the branch checks every accepted state for both and ends
-with status "contact" or "inverted", saying when and where, instead of a Newton failure
-(docs/postbuckling.md).
+Without self-contact (``stability.contact = false``, the default) the potential has no contact energy: once
+wrinkles fold into a crease, the permeable surface passes through itself and the states that follow mean
+nothing. With it (a penalty, :mod:`app.model.contact`, or a barrier, :mod:`app.model.barrier`) the surface
+holds, and a penalty that cannot hold a state is an overrun. In either case a cell with det F <= 0 cannot be
+represented (the energy's ln J is undefined there). A run that follows the branch checks every accepted
+state and ends with status "contact" (a crossing, or the penalty overrun) or "inverted", saying when and where, instead of a Newton
+failure (docs/postbuckling.md, docs/creases.md).
 """
 
 from __future__ import annotations
@@ -22,6 +24,10 @@ from app.model.surface import boundary_displacement, shape_of
 from app.solvers.stepping import ModelLimit
 
 
+NO_CONTACT = ("without stability.contact the surface may pass through itself and no element may invert, the "
+              "branch cannot be followed further")
+
+
 @dataclass
 class Limit:
     """A state the model cannot represent: which ("contact" / "inverted"), where, and a sentence."""
@@ -29,7 +35,7 @@ class Limit:
     status: str
     where: tuple[float, ...]  # (x, y) or (x, y, z)
     detail: str
-    consequence: str = "the model has no contact and no inverted elements, the branch cannot be followed further"
+    consequence: str = NO_CONTACT
     overshoot: bool = False  # a converged state that a shorter step may avoid (the stepper retries it)
     depth: float = 0.0  # a penetration that a stiffer penalty may hold, in elements (0: none)
     stiffened: bool = False  # the penalty was raised: the stepper solves the same step again
@@ -105,7 +111,7 @@ class InversionCheck:
         # with self-contact on, only the inversion is beyond the model
         return Limit("inverted", where, f"an element inverts (det F = {jmin:.3g}) at ("
                      + ", ".join(f"{v:.4g}" for v in where) + ") mm",
-                     INVERTED if p.contact is not None else Limit.consequence)
+                     INVERTED if p.contact is not None else NO_CONTACT)
 
 
 def contact_summary(problem, rows: list[dict]) -> dict:

@@ -112,7 +112,7 @@ class Rate(Criterion):
 
 
 CRITERIA: Registry[Criterion] = Registry("stability criterion")
-DRAINED = CRITERIA.register(Drained())
+CRITERIA.register(Drained())
 UNDRAINED = CRITERIA.register(Undrained())
 CRITERIA.register(Rate())
 DEFAULT = "drained"
