@@ -6,7 +6,10 @@ these objects and never see a config dict's structure, and solvers/ never see a 
 
 from __future__ import annotations
 
+from functools import partial
+
 from app import config, geometry
+from app.model import history
 from app.model.loading import Loading
 from app.model.material import Material
 from app.model.operators import cell_content_change
@@ -46,7 +49,8 @@ def evolution(p: Problem) -> Evolution:
     """What the time stepper advances of a problem: its forms, conditions, index sets and hooks."""
     return Evolution(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w, p.state, p.u_dofs, p.q_dofs,
                      p.comm, cell_content_change(p), tuple(p.loading.kinks()), p.diffusion, p.set_time,
-                     p.step_influx, p.observables, getattr(p, "contact", None))
+                     p.step_influx, partial(history.record, p), getattr(p, "contact", None),
+                     uptake="fluid_volume")
 
 
 def time_stepper(p: Problem, time: TimeSettings, solver: SolverSettings, log=None, limits: bool = True,

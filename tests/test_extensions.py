@@ -1,17 +1,18 @@
-"""Extending hydrobuckle from outside app/: a stability criterion, a material law and a loading, each
-registered by test code alone (no edit under app/), go through the config schema, validation and a run. Each
-is checked against a built-in path that computes the same thing another way. A toy geometry kind is tested
-the same way in tests/test_geometry_kinds.py."""
+"""Extending hydrobuckle from outside app/: a stability criterion, a material law, a loading and a history
+column, each registered by test code alone (no edit under app/), go through the config schema, validation and a
+run. Each is checked against a built-in path that computes the same thing another way. A toy geometry kind is
+tested the same way in tests/test_geometry_kinds.py."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import ufl
 from cases import swelling_case
-from conftest import run_to_end
+from conftest import read_csv, run_to_end, small_bilayer
 
-from app import config, factory
-from app.model import loading, material
+from app import compat, config, factory
+from app.model import history, loading, material
 from app.model.hydrogel import HydrogelLaw
 from app.onset import criteria
 from app.schema import ConfigError, gt, key
@@ -55,6 +56,38 @@ class RateSwelling(loading.Swelling):
 
     def kinks(self) -> list[float]:
         return [(self.params["chemical_potential"] - self.mu_start) / self.params["mu_rate"]]
+
+
+class SolidUptake:
+    """A toy history column: the fluid the solid has taken up, from the displacement alone. Before wrinkling
+    the bilayer swells laterally uniformly, and P_yy = 0 in each cell ties its content to its stretch:
+    s(l) = l J0 - 1 + gamma/(eps J0) (J0^(2/3) l - 1/l) (tests/test_physics.py derives it); its integral never
+    reads the flux dofs."""
+
+    columns = ("solid_uptake_mm2",)
+
+    def __init__(self):
+        self.name, self.doc, self._forms = "solid_uptake", "fluid taken up, from the displacement", {}
+
+    def applies(self, p) -> bool:
+        return p.domain.geometry.dim == 2
+
+    def values(self, p, t: float) -> dict:
+        if id(p) not in self._forms:
+            u_n, _ = ufl.split(p.state)
+            F = ufl.Identity(2) + ufl.grad(u_n)
+            m, lam = p.mat, F[1, 1]
+            s = ufl.det(F) * m.preswelling - 1 + m.shear_modulus / (m.penalty * m.preswelling) * (
+                m.preswelling ** (2 / 3) * lam - 1 / lam)
+            self._forms[id(p)] = compat.form(s * p.dx_coupling)  # one point per cell, as the penalty
+        return {"solid_uptake_mm2": compat.assemble_scalar(self._forms[id(p)], p.comm)}
+
+
+@pytest.fixture
+def solid_uptake():
+    group = history.HISTORY.register(SolidUptake())
+    yield group
+    history.HISTORY.unregister(group.name)
 
 
 @pytest.fixture
@@ -135,3 +168,22 @@ def test_a_registered_loading_runs_like_the_ramp_it_restates(rate_swelling, comm
         got, want = [getattr(r, column) for r in toy], [getattr(r, column) for r in ref]
         scale = max(abs(v) for v in want)  # measured serially: at most 5.2e-15 of the column's largest value
         assert got == pytest.approx(want, rel=0.0, abs=1e-12 * scale), column
+
+
+def test_a_registered_history_column_is_written_like_the_balance_it_restates(solid_uptake, shared_tmp, comm):
+    """A history column registered from test code appears in history.csv after the built-in model columns and
+    before the onset tracker's, and its values obey the fluid balance: the uptake computed from the
+    displacement alone minus its initial value equals the stepper's inflow through the top, step by step
+    (tests/test_physics.py measured 3.7e-14 of the final inflow)."""
+    out = shared_tmp / "uptake"
+    summary = simulate(small_bilayer(**{"time.end": 1.2, "stability.enabled": "true"}), out, comm, progress=False)
+    assert summary["status"] == "buckled"  # it stops at the onset: every state before it is laterally uniform
+    rows = read_csv(out / "history.csv")
+    names = list(rows[0])
+    assert names.index("energy") < names.index("solid_uptake_mm2") < names.index("negative_eigenvalues")
+    uptake = np.array([float(r["solid_uptake_mm2"]) for r in rows])
+    inflow = np.array([float(r["inflow"]) for r in rows])
+    fluid = np.array([float(r["fluid_volume"]) for r in rows])
+    assert uptake[0] == pytest.approx(fluid[0], rel=2e-14)  # the stress-free reference: s(1) = s0 in every cell
+    assert inflow[-1] > 10 * fluid[0]  # fluid really entered
+    assert np.abs((uptake - uptake[0]) - inflow).max() < 1e-13 * inflow[-1]

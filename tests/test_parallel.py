@@ -5,17 +5,19 @@ import pytest
 from conftest import run_to_end, small_bilayer
 from mpi4py import MPI
 
+from app.model import history
 from app.solvers.stepping import StepRecord
 
 # the surface's amplitude and wrinkle count are roundoff on these unbuckled paths (tests/test_postbuckling.py
 # compares them on a branch)
-COLUMNS = [c for c in StepRecord.COLUMNS
-           if c not in ("step", "newton_its", "error_estimate", "amplitude_mm", "wrinkle_count")]
+SKIPPED = ("step", "newton_its", "error_estimate", "amplitude_mm", "wrinkle_count")
 
 
 def _history(cfg, comm):
-    _, _, rows = run_to_end(cfg, comm)
-    return np.array([[getattr(r, c) for c in COLUMNS] for r in rows])
+    p, _, rows = run_to_end(cfg, comm)
+    columns = [c for c in StepRecord.COLUMNS + history.columns(p) if c not in SKIPPED]
+    assert {"time", "dt", "inflow", "growth_mm", "mu_bar", "fluid_volume", "applied_strain", "energy"} <= set(columns)
+    return np.array([[getattr(r, c) for c in columns] for r in rows])
 
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="compares a distributed run with a serial one")

@@ -336,8 +336,6 @@ class SelfContact:
         return connected_groups(set(int(i) for i in state.points), chains, bridges)
 
 
-# history.csv's columns with self-contact on (Problem.observables)
-COLUMNS = ("contact_length_mm", "creases", "contact_x_mm", "contact_y_mm", "penetration_mm")
 # the gap a state may show: a penetration beyond this fraction of the node's tributary length means the
 # penalty was overrun (a crossing the pairing no longer sees): the state is a model limit, not contact
 GAP_LIMIT = 0.1
@@ -407,7 +405,7 @@ class SurfaceContact(GatheredSurface):
         return ContactTerms(energy, self.global_entries, grad.reshape(-1))
 
     def observables(self, owned_values) -> dict:
-        """history.csv's contact columns (COLUMNS) at a state: the surface length in contact, the zones, the
+        """history.csv's contact columns (app.model.history's "contact" group) at a state: the surface length in contact, the zones, the
         deepest contact's reference place and its penetration (the penalty's gap)."""
         state = self.state(owned_values)
         pen = self.penalty

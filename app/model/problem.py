@@ -3,7 +3,8 @@ typed objects (:func:`app.factory.problem` makes them from a resolved config).
 
 One :class:`Problem` holds everything a time step needs: the unknown w = (u, dQ), the converged
 previous state (u_n, Q_n), the compiled residual/Hessian forms, the Dirichlet conditions and the
-loading as a function of time, plus the observables written to history.csv.
+loading as a function of time, plus the quantities of a converged state that history.csv records
+(:mod:`app.model.history` names the columns).
 """
 
 from __future__ import annotations
@@ -200,18 +201,6 @@ class Problem:
         from app.model.surface import surface_shape
 
         return surface_shape(self, self.state.x.array if array is None else array)
-
-    def observables(self, t: float) -> dict:
-        """What history.csv records of the converged state at time t, by column
-        (:class:`app.solvers.stepping.StepRecord`): growth, the loading's mu_bar and applied strain, fluid
-        volume, the surface's wrinkle amplitude and count, stored energy."""
-        amplitude, count = self.surface_shape()
-        out = {"growth_mm": self.growth(), "mu_bar": self.loading.mu_bar(t), "fluid_volume": self.fluid_volume(),
-               "applied_strain": self.loading.applied_strain(t), "amplitude_mm": amplitude,
-               "wrinkle_count": count, "energy": self.stored_energy()}
-        if self.contact is not None:  # with self-contact: its history columns (app.model.contact.COLUMNS)
-            out["extra"] = self.contact.observables(self.state.x.array)
-        return out
 
     def fluid_volume(self) -> float:
         """Integral of the fluid content s over the reference domain [mm^2 per unit depth]."""

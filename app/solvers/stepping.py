@@ -80,23 +80,32 @@ class LostStability(StepFailure):
 
 @dataclass
 class StepRecord:
+    """One accepted state: the stepper's own columns, the model's (``values``: the Evolution's
+    ``observables`` at that time, :mod:`app.model.history`) and what others add (``extra``: the onset
+    tracker's). A model column reads as an attribute too (``rec.growth_mm``)."""
+
     step: int
     time: float
     dt: float
     newton_its: int
-    growth_mm: float
-    mu_bar: float
-    fluid_volume: float
-    inflow: float
-    applied_strain: float
+    inflow: float  # the fluid volume that entered since t = 0 (the Evolution's influx, step by step)
     error_estimate: float = float("nan")
-    amplitude_mm: float = 0.0  # the surface's wrinkle amplitude (app.model.surface.surface_shape)
-    wrinkle_count: float = 0.0
-    energy: float = float("nan")  # stored energy of the state (Problem.stored_energy)
+    values: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)
 
-    COLUMNS = ("step", "time", "dt", "newton_its", "growth_mm", "mu_bar", "fluid_volume", "inflow",
-               "applied_strain", "error_estimate", "amplitude_mm", "wrinkle_count", "energy")
+    COLUMNS = ("step", "time", "dt", "newton_its", "inflow", "error_estimate")  # the stepper's own
+
+    def __getattr__(self, name: str):
+        if name.startswith("__") or name in ("values", "extra"):  # copies and pickles look before __init__
+            raise AttributeError(name)
+        try:
+            return self.values[name]
+        except KeyError:
+            raise AttributeError(f"StepRecord has no column {name!r}") from None
+
+    def row(self) -> dict:
+        """The history row: every column by name."""
+        return {**{c: getattr(self, c) for c in self.COLUMNS}, **self.values, **self.extra}
 
 
 @dataclass
@@ -148,8 +157,9 @@ class Evolution:
     diffusion: bool  # whether fluid moves (tau enters the potential)
     set_time: Callable[[float, float], None]  # (t, tau): the loading at t for a step of size tau
     influx: Callable[[], float]  # fluid volume entering through the permeable surface in the current step
-    observables: Callable[[float], dict]  # the converged state's StepRecord columns at time t
+    observables: Callable[[float], dict]  # the converged state's history columns at time t (StepRecord.values)
     extra: Any = None  # an energy term that is not a form (self-contact; NewtonSolver's ``extra``), or None
+    uptake: str | None = None  # the observable whose relative rate time.stop_at_equilibrium tests (None: never)
 
 
 class TimeStepper:
@@ -432,21 +442,25 @@ class TimeStepper:
     def at_equilibrium(self, rec: StepRecord) -> bool:
         """time.stop_at_equilibrium: whether the run has reached its equilibrium with the held loading.
 
-        The relative fluid uptake rate r = |dV/dt| t / |V - V(0)| (dV/dt over the last accepted step,
-        V the fluid volume, t the elapsed time) is below the threshold, after the last loading kink.
-        For an exponential approach V_inf - V ~ exp(-t/T), the uptake still missing is r T/t, less than
-        r of the uptake once t > T. Call it with every record of the run, the initial one first."""
+        The relative uptake rate r = |dV/dt| t / |V - V(0)| (dV/dt over the last accepted step, V the
+        Evolution's ``uptake`` observable: the fluid volume; t the elapsed time) is below the threshold, after
+        the last loading kink. For an exponential approach V_inf - V ~ exp(-t/T), the uptake still missing is
+        r T/t, less than r of the uptake once t > T. Call it with every record of the run, the initial one
+        first."""
+        if self.system.uptake is None:
+            return False
+        volume = rec.values[self.system.uptake]
         if self._volume0 is None:
-            self._volume0 = rec.fluid_volume
-        prev, self._volume = self._volume, (rec.time, rec.fluid_volume)
+            self._volume0 = volume
+        prev, self._volume = self._volume, (rec.time, volume)
         if self.equilibrium_threshold <= 0 or prev is None or rec.time <= prev[0]:
             return False
         if self.kinks and rec.time < self.kinks[-1] * (1 + 1e-12):
             return False
-        uptake = abs(rec.fluid_volume - self._volume0)
+        uptake = abs(volume - self._volume0)
         if uptake == 0.0:
             return False
-        rate = abs(rec.fluid_volume - prev[1]) / (rec.time - prev[0]) * rec.time / uptake
+        rate = abs(volume - prev[1]) / (rec.time - prev[0]) * rec.time / uptake
         self.uptake_rate = rate
         return rate < self.equilibrium_threshold
 
@@ -471,8 +485,7 @@ class TimeStepper:
         return self.record(dt, its, err)
 
     def record(self, dt: float, its: int, err: float) -> StepRecord:
-        return StepRecord(self.step, self.t, dt, its, inflow=self.inflow, error_estimate=err,
-                          **self.system.observables(self.t))
+        return StepRecord(self.step, self.t, dt, its, self.inflow, err, self.system.observables(self.t))
 
     def initial_record(self) -> StepRecord:
         return self.record(0.0, 0, float("nan"))

@@ -8,19 +8,19 @@ and writes; the summary is assembled in :func:`summarize`.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 from app import factory, interrupt, logging_setup, timing
 from app.io import checkpoint
 from app.io.output import OutputSettings, ResultWriter, versions
 from app.io.writes import ResultWriteError
-from app.model.contact import COLUMNS as CONTACT_COLUMNS
+from app.model import history
 from app.model.problem import Problem
 from app.model.patterns import branch_patterns
 from app.model.surface import SurfaceProfiles, shape_of, surface_profile
 from app.onset.branching import reference_length
 from app.onset.contact import contact_summary
-from app.onset.tracker import OnsetTracker, StabilitySettings, onset_tracker
+from app.onset.tracker import StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
 from app.solvers.stepping import ModelLimit, StepFailure, StepRecord, TimeSettings
 
@@ -45,13 +45,6 @@ class RunSettings:
     def from_config(cls, cfg: dict) -> RunSettings:
         return cls(TimeSettings.from_config(cfg), SolverSettings.from_config(cfg),
                    StabilitySettings.from_config(cfg), OutputSettings.from_config(cfg))
-
-
-def row_of(rec: StepRecord) -> dict:
-    d = asdict(rec)
-    extra = d.pop("extra")
-    d.update(extra)
-    return d
 
 
 def progress_line(rec: StepRecord) -> str:
@@ -155,9 +148,7 @@ class RunLoop:
         checkpoint's state in place; the initial state recorded (a new run)."""
         log = logging_setup.get()
         detail = log.info if progress else log.debug
-        columns = StepRecord.COLUMNS + (OnsetTracker.COLUMNS if settings.stability.enabled else ())
-        columns += CONTACT_COLUMNS if cfg["stability"].get("contact") else ()
-        writer = None if resume else ResultWriter(outdir, comm, cfg, settings.output, columns=columns)
+        writer = None if resume else ResultWriter(outdir, comm, cfg, settings.output)
         with timing.timed("setup"):
             if problem is None:
                 problem = factory.problem(cfg, comm)
@@ -165,6 +156,10 @@ class RunLoop:
             tracker = onset_tracker(problem, stepper, settings.stability, log=log.info, detail=detail,
                                     on_first_crossing=lambda crossing: loop.writer.write_mode(problem, crossing),
                                     reference_length=reference_length(cfg))
+        # the stepper's columns, the model's (app.model.history) and the onset tracker's
+        columns = StepRecord.COLUMNS + history.columns(problem) + tracker.COLUMNS
+        if writer is not None:
+            writer.columns = list(columns)  # before its first row
         watch.arm()  # gmsh reset SIGINT's handler
         checkpoints = checkpoint.Checkpoints(outdir, cfg, settings.output.checkpoint_every, log=log.info)
         if resume:
@@ -190,7 +185,7 @@ class RunLoop:
         else:
             first = stepper.initial_record()
             tracker.start(first)
-            writer.history_row(row_of(first))
+            writer.history_row(first.row())
             writer.write_fields(0.0)
             stepper.at_equilibrium(first)
         return loop
@@ -237,7 +232,7 @@ class RunLoop:
         """Everything told of an accepted step, in order (the tracker's columns go into the history row)."""
         self.writer.write_fields(rec.time, rec.step)
         self.tracker.test(rec)
-        self.writer.history_row(row_of(rec))
+        self.writer.history_row(rec.row())
         self.detail(progress_line(rec))
         if self.monitor is not None:
             self.monitor(rec)
