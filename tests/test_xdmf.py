@@ -1,6 +1,7 @@
 """fields.xdmf and mode.xdmf open as one dataset: one grid per output time carrying every field,
 times equal to history.csv's output steps, and values equal to the solver's fields (checked against
-independent computations from the file's own mesh and data), serially and on 2 ranks."""
+independent computations from the file's own mesh and data), serially and on 2 ranks; a field registered
+from test code (app/model/fields.py) is written like the built-in ones."""
 
 import csv
 import json
@@ -8,10 +9,11 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+import ufl
 from conftest import small_bilayer
 
-from app.io.output import FIELDS
 from app import factory
+from app.model.fields import FIELDS, Field
 from app.workflows.run import simulate
 
 h5py = pytest.importorskip("h5py")
@@ -57,7 +59,8 @@ def test_fields_and_mode_are_one_dataset_with_the_solver_values(shared_tmp, comm
 
     grids = _grids(out / "fields.xdmf")
     assert len(grids) == len(output_rows)
-    names = [name for name, _ in FIELDS]
+    names = ["displacement", "fluid_content", "chemical_potential", "J", "flux", "stress_xx", "stress_yy", "stress_xy",
+             "stress_min_principal"]  # docs/outputs.md
     with h5py.File(out / "fields.h5", "r") as h5:
         for grid, row in zip(grids, output_rows):
             assert float(grid.find("Time").get("Value")) == pytest.approx(float(row["time"]), rel=1e-14, abs=1e-300)
@@ -107,3 +110,33 @@ def test_fields_and_mode_are_one_dataset_with_the_solver_values(shared_tmp, comm
         mode = _data(h5, attrs["mode"])
         assert np.abs(mode).max() == pytest.approx(1.0, rel=1e-14)  # normalized to max |u| = 1
         assert np.abs(_data(h5, attrs["critical_displacement"])).max() > 0
+
+
+@pytest.fixture
+def stretch_field():
+    field = FIELDS.register(Field("stretch_trace", "tr(F^T F), per cell", "cell scalar",
+                                  lambda st: ufl.tr(st.F.T * st.F)))
+    yield field
+    FIELDS.unregister(field.name)
+
+
+def test_a_registered_field_is_written_with_the_others(stretch_field, shared_tmp, comm):
+    """A field registered from test code (no edit of app/) is on every grid of fields.xdmf beside the
+    built-in ones, with the value of its expression: tr(F^T F) at each cell centre, computed here from the
+    file's own nodal displacement (as J is above)."""
+    cfg = small_bilayer(**{"time.end": 0.5, "output.fields": "true", "output.every": 4,
+                           "stability.enabled": "false"})
+    out = shared_tmp / "toy-field"
+    simulate(cfg, out, comm, progress=False)
+    grids = _grids(out / "fields.xdmf")
+    assert len(grids) >= 2
+    with h5py.File(out / "fields.h5", "r") as h5:
+        for grid in grids:
+            attrs = {a.get("Name"): a for a in grid.findall("Attribute")}
+            assert "stretch_trace" in attrs and "J" in attrs and len(attrs) == 10
+            X, cells = _data(h5, grid.find("Geometry")), _data(h5, grid.find("Topology"))
+            u = _data(h5, attrs["displacement"])[:, :2]
+            F = np.eye(2) + _quad_centre_jacobians(u, cells) @ np.linalg.inv(_quad_centre_jacobians(X, cells))
+            expected = np.einsum("cij,cij->c", F, F)
+            assert np.allclose(_data(h5, attrs["stretch_trace"])[:, 0], expected, rtol=1e-12, atol=0)
+        assert np.abs(expected - 2.0).max() > 1e-3  # the last grid is deformed: the check is not 2 = 2

@@ -17,13 +17,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import ufl
 
 from app import compat, config, timing
 from app.io import writes
 from app.io.writes import ResultWriteError
 from app.io.xdmf import ballast_path
-from app.model.material import chemical_potential
+from app.model.fields import fields_for, state_of
 
 MODE_FILES = ("mode.xdmf", "mode.h5", "mode.png", "mode_surface.csv")  # written at the first crossing
 CHECKPOINT_FILES = ("checkpoint.npz", "checkpoint.npz.tmp")  # app.io.checkpoint
@@ -185,7 +184,7 @@ class ResultWriter:
     # --- fields ----------------------------------------------------------------------------
 
     def setup_fields(self, problem) -> None:
-        """Compile the post-processing expressions once (see :data:`FIELDS`), if fields are written."""
+        """Compile the post-processing expressions once (:mod:`app.model.fields`), if fields are written."""
         if not self.settings.fields or self.error is not None:
             return
         from app.io.xdmf import FieldSeries
@@ -355,38 +354,6 @@ class ResultWriter:
             self._history = None
 
 
-# name, meaning; every field of fields.xdmf, on one grid per output time
-FIELDS = (
-    ("displacement", "u [mm], nodal (CG1)"),
-    ("fluid_content", "s, fluid volume per reference volume, per cell"),
-    ("chemical_potential", "mu [MPa], per cell"),
-    ("J", "det F, per cell"),
-    ("flux", "H [mm/s] at the cell centre (the RTCF flux of the last step)"),
-    ("stress_xx", "Cauchy stress sigma_xx [MPa], per cell"),
-    ("stress_yy", "Cauchy stress sigma_yy [MPa], per cell"),
-    ("stress_xy", "Cauchy stress sigma_xy [MPa], per cell"),
-    ("stress_min_principal", "smaller in-plane principal Cauchy stress [MPa] (the film's compression), per cell; "
-                             "3D: the smallest principal stress"),
-)
-#: the stress components a 3D mesh adds (z: the plate's width, the tube's axis)
-FIELDS_3D = (
-    ("stress_zz", "Cauchy stress sigma_zz [MPa], per cell (3D)"),
-    ("stress_xz", "Cauchy stress sigma_xz [MPa], per cell (3D)"),
-    ("stress_yz", "Cauchy stress sigma_yz [MPa], per cell (3D)"),
-)
-
-
-def smallest_principal(sigma):
-    """The smallest eigenvalue of a symmetric 3 x 3 UFL tensor (the trigonometric closed form; an isotropic
-    tensor, where the deviator vanishes, gives its mean stress)."""
-    q = ufl.tr(sigma) / 3
-    dev = sigma - q * ufl.Identity(3)
-    p = ufl.sqrt(ufl.inner(dev, dev) / 6) + 1e-300
-    r = ufl.det(dev / p) / 2
-    r = ufl.max_value(ufl.min_value(r, 1.0), -1.0)
-    return q + 2 * p * ufl.cos(ufl.acos(r) / 3 + 2 * ufl.pi / 3)
-
-
 class _Filled:
     """A field computed outside UFL: ``fill(f)`` writes it into the Function f."""
 
@@ -395,40 +362,20 @@ class _Filled:
 
 
 def field_expressions(problem):
-    """(name, space, UFL expression) of every field in :data:`FIELDS`, from the converged state.
-
-    After a step is accepted, problem.state holds (u, Q) and problem.w the step's (u, dQ). The stress
-    is the Cauchy stress sigma = P F^T / det F and the chemical potential mu = dpsi/ds, both by UFL
-    differentiation of the material law's psi."""
-    from app.model.kinematics import deformation_gradient, fluid_content
-    from app.model.material import first_piola
-
+    """(name, space, UFL expression) of every registered field (:mod:`app.model.fields`) that the problem's
+    mesh gets, from the converged state."""
+    state = state_of(problem)
     domain = problem.domain
-    Vu = compat.vector_space(domain, "Lagrange", 1)
-    V0 = compat.scalar_space(domain, "DG", 0)
-    V0v = compat.vector_space(domain, "DG", 0)
-    u, Q = ufl.split(problem.state)
-    _, dQ = ufl.split(problem.w)
-    mat = problem.mat
-    F = ufl.variable(deformation_gradient(u))
-    s = fluid_content(mat.s0, Q)
-    J = ufl.det(F)
-    sigma = first_piola(mat, F, s) * F.T / J
-    mean = 0.5 * (sigma[0, 0] + sigma[1, 1])
-    radius = ufl.sqrt((0.5 * (sigma[0, 0] - sigma[1, 1])) ** 2 + sigma[0, 1] ** 2)
-    three_d = domain.geometry.dim == 3
-    exprs = {"displacement": (Vu, u), "fluid_content": (V0, s), "chemical_potential": (V0, chemical_potential(mat, F, s)),
-             "J": (V0, J), "flux": (V0v, dQ / problem.tau), "stress_xx": (V0, sigma[0, 0]),
-             "stress_yy": (V0, sigma[1, 1]), "stress_xy": (V0, sigma[0, 1]),
-             "stress_min_principal": (V0, smallest_principal(sigma) if three_d else mean - radius)}
-    if three_d:
-        exprs.update({"stress_zz": (V0, sigma[2, 2]), "stress_xz": (V0, sigma[0, 2]), "stress_yz": (V0, sigma[1, 2])})
-    return [(name, *exprs[name]) for name, _ in field_list(three_d)]
-
-
-def field_list(three_d: bool) -> tuple:
-    """(name, description) of the fields a run writes: :data:`FIELDS`, and :data:`FIELDS_3D` on a 3D mesh."""
-    return FIELDS + FIELDS_3D if three_d else FIELDS
+    spaces = {"nodal vector": lambda: compat.vector_space(domain, "Lagrange", 1),
+              "cell scalar": lambda: compat.scalar_space(domain, "DG", 0),
+              "cell vector": lambda: compat.vector_space(domain, "DG", 0)}
+    made = {}
+    out = []
+    for field in fields_for(state.dim):
+        if field.space not in made:
+            made[field.space] = spaces[field.space]()
+        out.append((field.name, made[field.space], field.expression(state)))
+    return out
 
 
 def _max():
