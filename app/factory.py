@@ -16,7 +16,7 @@ from app.model.operators import cell_content_change
 from app.model.problem import Discretization, Problem
 from app.onset.contact import ModelLimits
 from app.onset.criteria import LossOfStability
-from app.reduced.section import Layer, NotReducible, Section, drive, reducible
+from app.reduced.section import Layer, NotReducible, Section, reducible
 from app.solvers.newton import SolverSettings
 from app.solvers.stepping import Evolution, TimeSettings, TimeStepper
 
@@ -69,14 +69,8 @@ def section(cfg: dict) -> Section:
     if why:
         raise NotReducible(why)
     geo = cfg["geometry"]
+    cs = geometry.KINDS.get(geo["kind"]).cross_section(geo)  # the kind's own section
     materials = layer_materials(cfg)
-    loading = Loading.from_config(cfg, mu_start=materials["film"].mu0, drive=drive(cfg))
-    H, w = geo["substrate_thickness"], geo["film_thickness"]
-    if geo["kind"] in ("bilayer", "plate"):
-        layers = (Layer("substrate", 0.0, H), Layer("film", H, H + w))
-        return Section("planar", layers, H + w, 0.0, geo["length"], materials, loading, width=geo.get("width"),
-                       clamped=geo.get("base") == "clamped")
-    R = geo["outer_radius"]
-    a = R - H - w
-    layers = (Layer("film", a, a + w), Layer("substrate", a + w, R))
-    return Section("axisymmetric", layers, a, R, None, materials, loading, axial=geo["kind"] == "tube-3d")
+    loading = Loading.from_config(cfg, mu_start=materials["film"].mu0, drive=cs.drive)
+    return Section(cs.shape, tuple(Layer(*layer) for layer in cs.layers), cs.surface, cs.base, cs.length, materials,
+                   loading, width=cs.width, axial=cs.axial, clamped=cs.clamped)

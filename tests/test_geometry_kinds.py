@@ -1,12 +1,15 @@
 """Geometry kinds as a registry: every registered kind's keys and defaults are in the config schema, and a
-kind registered from outside (a toy kind here) is accepted by config, validation, `hydrobuckle mesh` and
-the problem without a change anywhere else."""
+kind registered from outside (a toy kind here) is accepted by config, validation, `hydrobuckle mesh`, the
+problem and, with a cross-section, the exact 1D reduction, without a change anywhere else."""
 
 import pytest
+from conftest import rank_local
 from mpi4py import MPI
 
 from app import cli, config, geometry
 from app.geometry import Drive, GeometryKind, GeometrySetup
+from app.geometry.base import CrossSection
+from app.geometry.bilayer import Bilayer
 from app.schema import ConfigError, gt, key
 
 
@@ -132,3 +135,45 @@ def test_the_mesh_command_asks_the_kind_whether_it_can_be_exported(shared_tmp, c
     err = capsys.readouterr().err
     if comm.rank == 0:
         assert "'msh' already is a .msh file; allowed here: bilayer, tube, elliptic-tube" in err
+
+
+class ToyStrip(Bilayer):
+    """A toy kind with a 1D counterpart: the bilayer under another name, its cross-section written out here (the
+    film on its substrate from the base to the permeable top) and only swelling reducible."""
+
+    name = "toy-strip"
+    reduced_loadings = ("swelling",)
+
+    def cross_section(self, geo):
+        H, w = geo["substrate_thickness"], geo["film_thickness"]
+        return CrossSection("planar", (("substrate", 0.0, H), ("film", H, H + w)), H + w, 0.0, geo["length"])
+
+
+@pytest.fixture
+def toy_strip():
+    kind = geometry.KINDS.register(ToyStrip())
+    try:
+        yield kind
+    finally:
+        geometry.KINDS.unregister(kind.name)
+
+
+@rank_local
+def test_a_registered_kinds_cross_section_gives_its_1d_reduction(toy_strip, toy):
+    """A kind's 1D counterpart comes from the kind alone (one class, one registration; no edit of factory or
+    app/reduced): the toy strip's section is the bilayer's, so its exact 1D onset is the bilayer's, bit for bit;
+    a loading outside its reduced_loadings and a kind without any are reported as not reducible, naming the key."""
+    from cases import swelling_case
+
+    from app.reduced.section import reducible
+    from app.workflows import reduced
+
+    ref = reduced.compute(swelling_case())
+    got = reduced.compute(swelling_case("geometry.kind=toy-strip"))
+    assert got["kind"] == ref["kind"] == "wrinkles"
+    for name in ("time", "growth_um", "wrinkle_count", "mu_bar"):
+        assert got[name] == ref[name], name
+    why = reducible(swelling_case("geometry.kind=toy-strip", "loading.kind=compression"))
+    assert why.startswith("loading.kind = 'compression'") and why.endswith("covers swelling")
+    why = reducible(config.resolve({"geometry": {"kind": "toy-slab"}}))
+    assert why.startswith("geometry.kind = 'toy-slab'") and "toy-strip" in why and "elliptic" not in why

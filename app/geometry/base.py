@@ -40,6 +40,32 @@ class Drive:
     length: float
 
 
+@dataclass(frozen=True)
+class CrossSection:
+    """A kind's exact 1D counterpart, as geometry: layers along one coordinate (each (material, start, end),
+    in increasing coordinate), where fluid enters and what is held. :func:`app.factory.section` adds the
+    materials and the loading (:class:`app.reduced.section.Section`, whose docstring says what each shape
+    means)."""
+
+    shape: str  # "planar" (Y from the base) or "axisymmetric" (r from the passage)
+    layers: tuple[tuple[str, float, float], ...]
+    surface: float  # coordinate of the permeable surface
+    base: float  # coordinate of the held boundary
+    length: float | None = None  # planar: the length L along the surface (wavenumber k = n pi / L)
+    width: float | None = None  # a 3D plate's width W (its modes: a lattice of |k|)
+    axial: bool = False  # a 3D tube: mode n is its axially uniform mode, wave vector (n, 0)
+    clamped: bool = False  # planar: the base holds both displacement components
+    drive: Drive | None = None  # the boundary a displacement loading moves (compression)
+
+
+def planar_cross_section(geo: dict, width: float | None = None, drive: Drive | None = None) -> CrossSection:
+    """The film on its substrate, from the base (Y = 0) to the permeable surface (Y = H + w), over the length L
+    (``geometry.length``); ``geometry.base = "clamped"`` holds the base in both components."""
+    H, w = geo["substrate_thickness"], geo["film_thickness"]
+    return CrossSection("planar", (("substrate", 0.0, H), ("film", H, H + w)), H + w, 0.0, geo["length"], width,
+                        clamped=geo.get("base") == "clamped", drive=drive)
+
+
 @dataclass
 class GeometrySetup:
     tm: object  # app.geometry.tagged.TaggedMesh
@@ -183,6 +209,15 @@ class GeometryKind:
 
     #: a 3D kind (hexahedra; its modes have wave vectors, stability.branch_modes may pick among them)
     three_d: ClassVar[bool] = False
+
+    #: the loadings whose laterally uniform (or axisymmetric) state :meth:`cross_section` reduces exactly to
+    #: 1D (app.reduced); empty: the kind has no 1D counterpart
+    reduced_loadings: ClassVar[tuple[str, ...]] = ()
+
+    def cross_section(self, geo: dict) -> CrossSection:
+        """The kind's exact 1D counterpart from its resolved [geometry] table (kinds with
+        :attr:`reduced_loadings`)."""
+        raise NotImplementedError
 
     #: a trial crease (stability.creases, app.onset.creases) can be placed: crease_setup and crease_line
     creases: ClassVar[bool] = False

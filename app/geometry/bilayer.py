@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from app.geometry.base import Drive, GeometryKind, GeometrySetup, base_key, base_role, layer_keys
+from app.geometry.base import (CrossSection, Drive, GeometryKind, GeometrySetup, base_key, base_role, layer_keys,
+                                planar_cross_section)
 from app.schema import ConfigError, gt, key
 
 if TYPE_CHECKING:
@@ -17,6 +18,7 @@ class Bilayer(GeometryKind):
     name = "bilayer"
     provides = frozenset({"drive"})  # a displacement loading moves the right edge
     creases = True  # a trial crease at the left edge (app.onset.creases)
+    reduced_loadings = ("swelling", "compression")  # laterally uniform: the planar 1D section
     mesh_defaults = {"element_size": 0.004, "film_layers": 8}
     film_element_fraction = 0.4
     keys = {
@@ -24,6 +26,9 @@ class Bilayer(GeometryKind):
         **layer_keys(substrate=0.5, film=0.01),
         "base": base_key(),
     }
+
+    def cross_section(self, geo: dict) -> CrossSection:
+        return planar_cross_section(geo, drive=Drive("right", 0, geo["length"]))
 
     def validate(self, cfg: dict) -> None:
         geo, mesh = cfg["geometry"], cfg["mesh"]

@@ -8,7 +8,8 @@ plate's too, with a mode exp(i k.x) critical where |k| meets the 1D margin curve
 
 from __future__ import annotations
 
-from app.geometry.base import (MEMORY_BASE_MB, MEMORY_PER_DOF_KB, Drive, GeometryKind, GeometrySetup, base_key,
+from app.geometry.base import (MEMORY_BASE_MB, MEMORY_PER_DOF_KB, CrossSection, Drive, GeometryKind, GeometrySetup,
+                               base_key, planar_cross_section,
                                base_role, layer_keys)
 from app.schema import ConfigError, gt, key
 
@@ -17,9 +18,10 @@ class Plate(GeometryKind):
     name = "plate"
     # a displacement loading moves the right side (x = L) along x. Under that uniaxial drive the in-plane base
     # state is anisotropic, so the 1D reduction over |k| that certifies a swelling plate's onset does not apply
-    # (app.reduced.section.LOADINGS: reported as not reducible); a plate one element wide is the plane-strain
+    # (not in reduced_loadings: reported as not reducible); a plate one element wide is the plane-strain
     # bilayer under the same drive
     provides = frozenset({"drive"})
+    reduced_loadings = ("swelling",)  # laterally uniform: the bilayer's planar section, modes on the lattice of |k|
     three_d = True
     # a plate a few wavelengths wide at a size whose onset (with its error bar) takes minutes on 2 cores
     mesh_defaults = {"element_size": 0.0125, "film_layers": 2}
@@ -30,6 +32,9 @@ class Plate(GeometryKind):
         **layer_keys(substrate=0.1, film=0.01),
         "base": base_key(),
     }
+
+    def cross_section(self, geo: dict) -> CrossSection:
+        return planar_cross_section(geo, width=geo["width"], drive=Drive("right", 0, geo["length"]))
 
     def validate(self, cfg: dict) -> None:
         geo, mesh = cfg["geometry"], cfg["mesh"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from app.geometry.base import GeometryKind, GeometrySetup, layer_keys
+from app.geometry.base import CrossSection, GeometryKind, GeometrySetup, layer_keys
 from app.schema import ConfigError, gt, in_closed, key
 
 if TYPE_CHECKING:
@@ -22,6 +22,15 @@ class Tube(GeometryKind):
     }
     mesh_defaults = {"element_size": 0.01, "film_layers": 4}
     film_element_fraction = 0.5
+    reduced_loadings = ("swelling",)  # axisymmetric: the polar 1D section
+
+    def cross_section(self, geo: dict) -> CrossSection:
+        """r from the passage (r = R - H - w, the film's permeable surface) to the rigid wall at R; a 3D tube's
+        modes with this section are its axially uniform ones."""
+        R = geo["outer_radius"]
+        a = R - geo["substrate_thickness"] - geo["film_thickness"]
+        return CrossSection("axisymmetric", (("film", a, a + geo["film_thickness"]), ("substrate",
+                                             a + geo["film_thickness"], R)), a, R, axial=self.three_d)
 
     def aspect_ratio(self, geo: dict) -> float:
         return 1.0
@@ -82,6 +91,7 @@ class EllipticTube(Tube):
 
     name = "elliptic-tube"
     keys = {**Tube.keys, "aspect_ratio": key(float, 1.0, in_closed(1.0, 10.0), "a/b of the elliptic passage")}
+    reduced_loadings = ()  # the passage is not axisymmetric
 
     def aspect_ratio(self, geo: dict) -> float:
         return geo["aspect_ratio"]

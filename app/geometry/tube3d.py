@@ -70,6 +70,7 @@ class EllipticTube3D(Tube3D):
 
     name = "elliptic-tube-3d"
     keys = {**Tube3D.keys, "aspect_ratio": EllipticTube.keys["aspect_ratio"]}
+    reduced_loadings = ()
 
     def aspect_ratio(self, geo: dict) -> float:
         return geo["aspect_ratio"]

@@ -1,5 +1,7 @@
 """The cross-section of a laterally uniform bilayer or an axisymmetric tube: layers along one coordinate,
-where fluid enters, what is held, and the 1D mesh.
+where fluid enters, what is held, and the 1D mesh. Which geometry kinds have one, for which loadings, and its
+layers: each kind says (:meth:`app.geometry.base.GeometryKind.cross_section`, ``reduced_loadings``); nothing
+here names a kind.
 
 Planar (``geometry.kind = "bilayer"``): Y from the substrate's base (Y = 0, roller: u_y = 0, or clamped: u = 0;
 no flux) to
@@ -20,14 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from app import geometry
 from app.model.loading import Loading
 from app.model.material import Material
 
-KINDS = ("bilayer", "tube", "plate", "tube-3d")
 CRITERIA = ("drained", "undrained", "rate")  # the stability criteria with a 1D counterpart (modes.py)
-# the plate's compression is uniaxial: its state is not the same in x and z, so only stripes along x reduce
-LOADINGS = {"bilayer": ("swelling", "compression"), "tube": ("swelling",), "plate": ("swelling",),
-            "tube-3d": ("swelling",)}
 LATTICE_WAVENUMBER = 40.0  # the plate's lattice of |k| is listed up to k w = this (above the tested maximum)
 
 
@@ -154,22 +153,17 @@ def _graded(length: float, first: float, ratio: float, from_start: bool) -> np.n
     return x if from_start else length - x[::-1]
 
 
-def drive(cfg: dict):
-    from app.geometry.base import Drive
-
-    geo = cfg["geometry"]
-    return Drive("right", 0, geo["length"]) if geo["kind"] in ("bilayer", "plate") else None
-
-
 def reducible(cfg: dict) -> str:
     """'' when the config has an exact 1D reduction, else the reason (naming the key)."""
     geo, lo = cfg["geometry"], cfg["loading"]
-    if geo["kind"] not in KINDS:
+    kind = geometry.KINDS.get(geo["kind"]) if geo["kind"] in geometry.KINDS else None
+    if kind is None or not kind.reduced_loadings:
+        able = ", ".join(k.name for k in geometry.KINDS if k.reduced_loadings)
         return (f"geometry.kind = {geo['kind']!r}: the 1D reduction covers the laterally uniform bilayer and the "
-                f"circular tube ({', '.join(KINDS)})")
-    if lo["kind"] not in LOADINGS[geo["kind"]]:
+                f"circular tube ({able})")
+    if lo["kind"] not in kind.reduced_loadings:
         return (f"loading.kind = {lo['kind']!r}: the 1D reduction of a {geo['kind']} covers "
-                f"{', '.join(LOADINGS[geo['kind']])}")
+                f"{', '.join(kind.reduced_loadings)}")
     criterion = cfg["stability"]["criterion"]
     if criterion not in CRITERIA:
         return f"stability.criterion = {criterion!r}: the 1D reduction covers {', '.join(CRITERIA)}"
