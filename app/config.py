@@ -169,6 +169,15 @@ def kind_defaults() -> dict:
     return {k.name: {"geometry": k.defaults(), "mesh": dict(k.mesh_defaults)} for k in _kinds()}
 
 
+def reducible(cfg: dict) -> str:
+    """'' when the config has an exact 1D reduction, else the reason naming the key
+    (:func:`app.reduced.section.reducible`)."""
+    from app.reduced.section import reducible as section_reducible
+
+    return section_reducible(cfg["geometry"]["kind"], cfg["loading"]["kind"], cfg["stability"]["criterion"],
+                             cfg["material"].get("layers", {}) or {})
+
+
 def leaves(table: dict | None = None, prefix: str = ""):
     """Every key of ``table`` (default: the whole :func:`schema`) as (dotted name, :class:`~app.schema.Key`),
     in the order a resolved config lists them (the docs' reference page, the bad-input sweep)."""
@@ -388,8 +397,6 @@ def validate(cfg: dict) -> None:
                           + " or ".join(repr(k.name) for k in _kinds() if k.creases)
                           + " with loading.kind = " + " or ".join(map(repr, able)))
     if stab["creases"] and stab["crease_fluid"] == "transient" and not loading.fluid_frozen:
-        from app.reduced.section import reducible
-
         why = reducible(cfg)
         if why:
             raise ConfigError("stability.crease_fluid", "= 'transient' takes the run's content from its exact 1D "

@@ -20,7 +20,6 @@ from conftest import long_physics
 
 from app import config, factory, geometry
 from app.onset.creases import CreaseFailed, CreaseTrial, FlatFailed
-from app.solvers.newton import SolverSettings
 from app.workflows import creases as workflow
 from app.workflows.pipeline import run_case
 
@@ -52,7 +51,7 @@ def _trial(cfg, comm, size: float, resolution: int, fluid: str = "drained",
     p = factory.problem(cfg, comm, setup=kind.crease_setup(cfg, comm, c / resolution, 1.5 * c))
     mu = p.materials["film"].shear_modulus
     mirror = cfg["stability"]["contact_stiffness"] * mu * resolution / c if grows else None
-    return CreaseTrial(p, c, SolverSettings.from_config(cfg), fluid=fluid, mirror_stiffness=mirror), c
+    return CreaseTrial(p, c, factory.solver_settings(cfg), fluid=fluid, mirror_stiffness=mirror), c
 
 
 def _coarsest_level(cfg, comm, size: float, grows: bool) -> dict:

@@ -29,7 +29,6 @@ from test_creases import same_on_one_and_all_ranks
 from app import config, factory, geometry
 from app.model import theory
 from app.onset.creases import CreaseTrial
-from app.solvers.newton import SolverSettings
 from app.workflows import creases as workflow
 from app.workflows.pipeline import run_case
 
@@ -166,7 +165,7 @@ def test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_stati
         kind = geometry.kind_of(cfg)
         c = 0.05 * H
         p = factory.problem(cfg, on, setup=kind.crease_setup(cfg, on, c / 4, 1.5 * c))
-        trial = CreaseTrial(p, c, SolverSettings.from_config(cfg), fluid=fluid,
+        trial = CreaseTrial(p, c, factory.solver_settings(cfg), fluid=fluid,
                             content=profile if fluid == "transient" else None)
         try:
             return trial.trial(t)

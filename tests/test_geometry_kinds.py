@@ -165,7 +165,6 @@ def test_a_registered_kinds_cross_section_gives_its_1d_reduction(toy_strip, toy)
     a loading outside its reduced_loadings and a kind without any are reported as not reducible, naming the key."""
     from cases import swelling_case
 
-    from app.reduced.section import reducible
     from app.workflows import reduced
 
     ref = reduced.compute(swelling_case())
@@ -173,7 +172,7 @@ def test_a_registered_kinds_cross_section_gives_its_1d_reduction(toy_strip, toy)
     assert got["kind"] == ref["kind"] == "wrinkles"
     for name in ("time", "growth_um", "wrinkle_count", "mu_bar"):
         assert got[name] == ref[name], name
-    why = reducible(swelling_case("geometry.kind=toy-strip", "loading.kind=compression"))
+    why = config.reducible(swelling_case("geometry.kind=toy-strip", "loading.kind=compression"))
     assert why.startswith("loading.kind = 'compression'") and why.endswith("covers swelling")
-    why = reducible(config.resolve({"geometry": {"kind": "toy-slab"}}))
+    why = config.reducible(config.resolve({"geometry": {"kind": "toy-slab"}}))
     assert why.startswith("geometry.kind = 'toy-slab'") and "toy-strip" in why and "elliptic" not in why

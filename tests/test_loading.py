@@ -78,7 +78,7 @@ def test_loading_keys_and_kinds_come_from_the_registry():
         for name, key in lo.keys.items():
             assert config.schema()["loading"][name] is key and cfg["loading"][name] == key.default
     cfg = config.resolve({}, ["loading.kind=compression", "loading.compression_strain=0.2", "time.end=4"])
-    from app.model.loading import Loading
+    from app import factory
 
-    lo = Loading.from_config(cfg, mu_start=-1.0, drive=None)
+    lo = factory.loading(cfg, mu_start=-1.0)
     assert lo.kind == "compression" and lo.applied_strain(2.0) == 0.1

@@ -393,12 +393,12 @@ def test_branch_keys_are_checked(sets, key):
 
 
 def test_stop_at_onset_keeps_working():
-    from app.onset.tracker import StabilitySettings
+    from app import factory
 
-    assert StabilitySettings.from_config(config.resolve({}, ["stability.stop_at_onset=false"])).policy.after.value \
+    assert factory.stability_settings(config.resolve({}, ["stability.stop_at_onset=false"])).policy.after.value \
         == "fundamental"
-    assert StabilitySettings.from_config(config.resolve({})).policy.after.value == "stop"
-    assert StabilitySettings.from_config(config.resolve({}, ["stability.after_onset=branch"])).policy.branches
+    assert factory.stability_settings(config.resolve({})).policy.after.value == "stop"
+    assert factory.stability_settings(config.resolve({}, ["stability.after_onset=branch"])).policy.branches
 
 
 # docs/postbuckling.md's mesh sequence, its coarsest level: the paper's bilayer at element 0.008 mm, 4 film layers

@@ -52,11 +52,6 @@ class Loading:
         self.params = {k: params[k] for k in self.keys}
         self.mu_start, self.end_time, self.drive = mu_start, end_time, drive
 
-    @classmethod
-    def from_config(cls, cfg: dict, *, mu_start: float, drive: Drive | None = None) -> Loading:
-        lo = cfg["loading"]
-        return LOADINGS.get(lo["kind"])(lo, mu_start=mu_start, end_time=cfg["time"]["end"], drive=drive)
-
     @property
     def kind(self) -> str:
         return self.name

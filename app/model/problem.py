@@ -33,11 +33,6 @@ class Discretization:
     coupling_quadrature_degree: int = 1  # the law's constraint part (one point: no volumetric locking)
     initial_step: float = 1.0e-3
 
-    @classmethod
-    def from_config(cls, cfg: dict) -> Discretization:
-        mesh = cfg["mesh"]
-        return cls(mesh["quadrature_degree"], mesh["coupling_quadrature_degree"], cfg["time"]["dt_initial"])
-
 
 class Problem:
     """The discrete incremental minimization problem of one configuration."""

@@ -46,14 +46,6 @@ class Switch:
                 "imperfection_mm": self.imperfection_mm, "with_flux": self.with_flux, "inflow": self.inflow}
 
 
-def reference_length(cfg: dict) -> float | None:
-    """The length stability.imperfection is a fraction of: the film thickness, or (kinds without one) the
-    element size; None if the config has neither (a user's .msh: then the mesh's typical cell size,
-    :func:`typical_cell_size`)."""
-    value = cfg["geometry"].get("film_thickness") or cfg["mesh"].get("element_size")
-    return float(value) if value else None
-
-
 def typical_cell_size(problem) -> float:
     """sqrt(area / cells) of the mesh as its file has it: a .msh mesh split by mesh.refinements keeps the
     file's cell size, so the imperfection is the same on every level of a refinement study."""

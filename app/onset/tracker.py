@@ -39,16 +39,6 @@ class StabilitySettings:
     surface_check: bool = True  # the permeable surface's short-wave limit every step (app.onset.surface)
     branch_modes: str = "1"  # after_onset = branch: which of the onset's crossing modes the switch adds ("1+2")
 
-    @classmethod
-    def from_config(cls, cfg: dict) -> StabilitySettings:
-        s = cfg["stability"]
-        rule = CRITERIA.get(s["criterion"])
-        return cls(s["enabled"], s["tolerance"],
-                   CrossingPolicy.from_flags(s["stop_at_onset"], s["max_crossings"], s.get("after_onset")),
-                   s["modes"], s["eigen_every"], s["screening"], s["error_estimate"], s["criterion"],
-                   {k: s[k] for k in rule.keys}, s.get("imperfection", 0.01), s.get("surface_check", True),
-                   s.get("branch_modes") or "1")
-
     @property
     def rule(self) -> Criterion:
         return CRITERIA.get(self.criterion)
@@ -61,7 +51,7 @@ class StabilitySettings:
 def onset_tracker(problem, stepper, settings: StabilitySettings, on_first_crossing=None, log=None, detail=None,
                   reference_length: float | None = None):
     """The tracker a run with these settings needs (:class:`Untracked` when the test is off).
-    ``reference_length``: what stability.imperfection is a fraction of (app.onset.branching.reference_length)."""
+    ``reference_length``: what stability.imperfection is a fraction of (app.factory.reference_length)."""
     if not settings.enabled:
         return Untracked()
     return OnsetTracker(problem, stepper, settings, on_first_crossing, log, detail, reference_length)

@@ -153,21 +153,20 @@ def _graded(length: float, first: float, ratio: float, from_start: bool) -> np.n
     return x if from_start else length - x[::-1]
 
 
-def reducible(cfg: dict) -> str:
-    """'' when the config has an exact 1D reduction, else the reason (naming the key)."""
-    geo, lo = cfg["geometry"], cfg["loading"]
-    kind = geometry.KINDS.get(geo["kind"]) if geo["kind"] in geometry.KINDS else None
+def reducible(geometry_kind: str, loading_kind: str, criterion: str, extra_layers=()) -> str:
+    """'' when a config of this geometry kind, loading and stability criterion, with these materials besides
+    film and substrate (``material.layers``), has an exact 1D reduction; else the reason, naming the key
+    (:func:`app.config.reducible` reads them from a config)."""
+    kind = geometry.KINDS.get(geometry_kind) if geometry_kind in geometry.KINDS else None
     if kind is None or not kind.reduced_loadings:
         able = ", ".join(k.name for k in geometry.KINDS if k.reduced_loadings)
-        return (f"geometry.kind = {geo['kind']!r}: the 1D reduction covers the laterally uniform bilayer and the "
+        return (f"geometry.kind = {geometry_kind!r}: the 1D reduction covers the laterally uniform bilayer and the "
                 f"circular tube ({able})")
-    if lo["kind"] not in kind.reduced_loadings:
-        return (f"loading.kind = {lo['kind']!r}: the 1D reduction of a {geo['kind']} covers "
+    if loading_kind not in kind.reduced_loadings:
+        return (f"loading.kind = {loading_kind!r}: the 1D reduction of a {geometry_kind} covers "
                 f"{', '.join(kind.reduced_loadings)}")
-    criterion = cfg["stability"]["criterion"]
     if criterion not in CRITERIA:
         return f"stability.criterion = {criterion!r}: the 1D reduction covers {', '.join(CRITERIA)}"
-    extra = set(cfg["material"].get("layers", {}) or {})
-    if extra:
+    if set(extra_layers):
         return "material.layers: the 1D reduction covers the two-layer film/substrate section only"
     return ""

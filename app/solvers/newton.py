@@ -34,12 +34,6 @@ class SolverSettings:
     reuse: bool = False  # modified Newton: keep the factor while |R| falls by reuse_rate per iteration
     reuse_rate: float = 0.03
 
-    @classmethod
-    def from_config(cls, cfg: dict) -> SolverSettings:
-        s = cfg["solver"]
-        return cls(s["rtol"], s["atol"], s["max_it"], s["factorization"], s["linear"], s["ksp_rtol"],
-                   s["ksp_max_it"], reuse=s["reuse"], reuse_rate=s["reuse_rate"])
-
 
 def allow_new_nonzeros(A: PETSc.Mat) -> None:
     """Let ``A`` take entries outside the pattern of its form (an extra term's couplings)."""

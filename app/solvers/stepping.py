@@ -41,12 +41,6 @@ class TimeSettings:
     stop_at_equilibrium: float = 0.0  # threshold of the relative uptake rate (0 = off)
     controller: str = "predictive"  # the adaptive step's rule (app.solvers.step_control)
 
-    @classmethod
-    def from_config(cls, cfg: dict) -> TimeSettings:
-        t = cfg["time"]
-        return cls(t["end"], t["dt_initial"], t["dt_min"], t["dt_max"], t["tolerance"], t["adaptive"],
-                   t["max_steps"], t.get("stop_at_equilibrium", 0.0), t.get("controller", "predictive"))
-
     def step_control(self) -> StepControl:
         return StepControl(self.tolerance, self.dt_min, self.dt_max, self.adaptive, self.dt_initial,
                            self.controller)

@@ -27,7 +27,6 @@ from app import config, factory, geometry, logging_setup
 from app.model import theory
 from app.onset.creases import CreaseFailed, CreaseTrial, FlatFailed
 from app.reduced.transient import TransientFailed, content_profile
-from app.solvers.newton import SolverSettings
 from app.workflows.convergence import richardson
 from app.workflows.reduced import settings as reduced_settings
 
@@ -74,7 +73,7 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
     c = crease_length(cfg)
     finest = cfg["stability"]["crease_resolution"]
     resolutions = [finest // LEVEL_RATIO ** k for k in (2, 1, 0)]
-    settings = SolverSettings.from_config(cfg)
+    settings = factory.solver_settings(cfg)
     fluid = cfg["stability"]["crease_fluid"]
     grows = cfg["stability"]["crease_growth"]
     transient = fluid == "transient" and not config.loading_kind(cfg).fluid_frozen

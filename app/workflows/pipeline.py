@@ -9,7 +9,7 @@ itself) and take no pipeline steps.
 
 from __future__ import annotations
 
-from app.reduced.section import reducible
+from app import config
 from app.workflows.creases import add_creases
 from app.workflows.error_estimate import add_error_estimate
 from app.workflows.reduced import add_reduced
@@ -21,7 +21,7 @@ def after_run_steps(cfg: dict, outdir, comm) -> list:
     steps = []
     if cfg["stability"]["error_estimate"]:
         steps.append(lambda summary: add_error_estimate(summary, cfg, outdir, comm))
-    if cfg["reduced"]["beside_2d"] and cfg["stability"]["enabled"] and not reducible(cfg):
+    if cfg["reduced"]["beside_2d"] and cfg["stability"]["enabled"] and not config.reducible(cfg):
         steps.append(lambda summary: add_reduced(summary, cfg, comm))
     if cfg["stability"]["creases"]:
         steps.append(lambda summary: add_creases(summary, cfg, comm))

@@ -19,10 +19,8 @@ def check(cfgs: list[dict], comm, outdir, labels: list[str] | None = None, force
     input files (``inputs``), then the result directory ``outdir`` (claimed last; None: not yet).
     ``labels``: the cases' labels (a study's or sweep's), named in the errors as "case <label>"."""
     if reduced:
-        from app.reduced.section import reducible
-
         for i, cfg in enumerate(cfgs):
-            why = reducible(cfg)
+            why = config.reducible(cfg)
             if why:
                 raise (config.ConfigError("--reduced", f"case {labels[i]}: {why}") if labels else
                        config.ConfigError("", why))

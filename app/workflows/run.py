@@ -18,7 +18,6 @@ from app.model import history
 from app.model.problem import Problem
 from app.model.patterns import branch_patterns
 from app.model.surface import SurfaceProfiles, shape_of, surface_profile
-from app.onset.branching import reference_length
 from app.onset.contact import contact_summary
 from app.onset.tracker import StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
@@ -43,8 +42,8 @@ class RunSettings:
 
     @classmethod
     def from_config(cls, cfg: dict) -> RunSettings:
-        return cls(TimeSettings.from_config(cfg), SolverSettings.from_config(cfg),
-                   StabilitySettings.from_config(cfg), OutputSettings.from_config(cfg))
+        return cls(factory.time_settings(cfg), factory.solver_settings(cfg), factory.stability_settings(cfg),
+                   OutputSettings.from_config(cfg))
 
 
 def progress_line(rec: StepRecord) -> str:
@@ -155,7 +154,7 @@ class RunLoop:
             stepper = factory.time_stepper(problem, settings.time, settings.solver, log=log.info)
             tracker = onset_tracker(problem, stepper, settings.stability, log=log.info, detail=detail,
                                     on_first_crossing=lambda crossing: loop.writer.write_mode(problem, crossing),
-                                    reference_length=reference_length(cfg))
+                                    reference_length=factory.reference_length(cfg))
         # the stepper's columns, the model's (app.model.history) and the onset tracker's
         columns = StepRecord.COLUMNS + history.columns(problem) + tracker.COLUMNS
         if writer is not None:
