@@ -64,13 +64,18 @@ class ToySlab(GeometryKind):
                              drive=Drive("right", 0, g["span"]))
 
 
-@pytest.fixture
-def toy():
-    kind = geometry.KINDS.register(ToySlab())
+def _registered(kind):
+    """The kind registered for one test, unregistered after it."""
+    geometry.KINDS.register(kind)
     try:
         yield kind
     finally:
         geometry.KINDS.unregister(kind.name)
+
+
+@pytest.fixture
+def toy():
+    yield from _registered(ToySlab())
 
 
 def test_a_registered_kind_is_accepted_by_config(toy):
@@ -151,11 +156,7 @@ class ToyStrip(Bilayer):
 
 @pytest.fixture
 def toy_strip():
-    kind = geometry.KINDS.register(ToyStrip())
-    try:
-        yield kind
-    finally:
-        geometry.KINDS.unregister(kind.name)
+    yield from _registered(ToyStrip())
 
 
 @rank_local
