@@ -269,12 +269,8 @@ def cells_with_tag(cell_tags, tag: int) -> np.ndarray:
 
 
 
-# --- forms, assembly, boundary conditions ----------------------------------------------
-
-form = fem.form
-Function = fem.Function
-Constant = fem.Constant
-
+# --- forms, assembly, boundary conditions (dolfinx.fem.form, Function and Constant are the same in 0.5 and 0.9:
+# called directly) --------------------------------------------------------------------------------------------
 
 def dirichlet_zero_on_facets(W_sub, facets: np.ndarray, fdim: int):
     """Homogeneous Dirichlet condition on a (possibly nested) sub-space of a mixed space.

@@ -20,7 +20,7 @@ from app.onset.policy import CrossingPolicy
 from app.onset.tracker import StabilitySettings
 from app.reduced.section import Layer, NotReducible, Section
 from app.solvers.newton import SolverSettings
-from app.solvers.stepping import Evolution, TimeSettings, TimeStepper
+from app.solvers.stepping import SteppedProblem, TimeSettings, TimeStepper
 
 
 def layer_materials(cfg: dict, names=("film", "substrate")) -> dict[str, Material]:
@@ -95,9 +95,9 @@ def problem(cfg: dict, comm, setup: geometry.GeometrySetup | None = None) -> Pro
     return p
 
 
-def evolution(p: Problem) -> Evolution:
+def stepped_problem(p: Problem) -> SteppedProblem:
     """What the time stepper advances of a problem: its forms, conditions, index sets and hooks."""
-    return Evolution(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w, p.state, p.u_dofs, p.q_dofs,
+    return SteppedProblem(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w, p.state, p.u_dofs, p.q_dofs,
                      p.comm, cell_content_change(p), tuple(p.loading.kinks()), p.diffusion, p.set_time,
                      p.step_influx, partial(history.record, p), getattr(p, "contact", None),
                      uptake="fluid_volume")
@@ -108,7 +108,7 @@ def time_stepper(p: Problem, time: TimeSettings, solver: SolverSettings, log=Non
     """The problem's time stepper; ``limits``: a followed branch ends at self-contact or an inverted cell
     (:class:`app.onset.contact.ModelLimits`); ``diagnose``: two failed attempts in a row test the state's
     stability (:class:`app.onset.criteria.LossOfStability`)."""
-    return TimeStepper(evolution(p), time, solver, log=log, limits=(lambda: ModelLimits(p)) if limits else None,
+    return TimeStepper(stepped_problem(p), time, solver, log=log, limits=(lambda: ModelLimits(p)) if limits else None,
                        check=LossOfStability(p) if diagnose else None)
 
 

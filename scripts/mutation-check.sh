@@ -154,7 +154,7 @@ MUTATIONS = [
      r"        except FlatFailed:  # no flat state, no comparison: the level cannot be completed\n            raise\n", "",
      ["tests/test_creases.py::test_a_flat_state_that_cannot_be_solved_ends_the_level_instead_of_counting_as_past_the_onset"]),
     ("a crease bracket that snaps is taken for a sign change", "app/workflows/creases.py",
-     r'return "failed" in tb or \(not grows and tb\["depth_mm"\] > SNAP \* ta\["depth_mm"\]\)', "return False",
+     r'return "failed" in tb or \(not grows and tb\["depth_mm"\] > SNAP_DEPTH_RATIO \* ta\["depth_mm"\]\)', "return False",
      ["tests/test_creases.py::test_a_bracket_that_ends_in_a_snap_bounds_the_onset_from_above"]),
     ("a .msh mesh's mesh companion asks for an element size again", "app/workflows/error_estimate.py",
      r"        return refined_configs\(cfg, study, 2\)\[1\]\[2\], \"refined\"", "        raise",

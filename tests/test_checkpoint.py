@@ -28,9 +28,9 @@ import pytest
 import ufl
 from cases import LONG, TINY_BILAYER_TOML, swelling_case
 from conftest import (
-    child_jobs,
     EXE,
     MPIRUN,
+    child_jobs,
     finish,
     kill_session,
     on_rank0,
@@ -46,13 +46,13 @@ from conftest import (
     wait_rows,
     write_on_rank0,
 )
+from dolfinx import fem
 from mpi4py import MPI
 
-from app import compat, config
+from app import compat, config, factory
 from app.cli import main
 from app.io import checkpoint
-from app import factory
-from app.onset.tracker import Untracked
+from app.onset.tracker import NoStabilityTest
 from app.workflows.run import simulate
 
 EVERY = ("output.checkpoint_every=3", "stability.error_estimate=false")
@@ -96,7 +96,7 @@ def _dq(x):
 
 
 def _interpolated(V, fn) -> np.ndarray:
-    f = compat.Function(V)
+    f = fem.Function(V)
     f.interpolate(fn)
     f.x.scatter_forward()
     return f.x.array.copy()
@@ -123,21 +123,21 @@ def _save_known(path, comm) -> None:
     if comm.rank == 0:
         path.mkdir(parents=True, exist_ok=True)
     comm.barrier()
-    checkpoint.write(path, cfg, checkpoint.DofLayout(p), st, Untracked(), rows=[{"step": 0}])
+    checkpoint.write(path, cfg, checkpoint.DofLayout(p), st, NoStabilityTest(), rows=[{"step": 0}])
     st.destroy()
 
 
 def _flux_mismatch(p, a: np.ndarray, b: np.ndarray) -> float:
     """sqrt of (sum over facets of (flux of a - b)^2 + volume L2 of a - b) over the same of b: every
     facet's flux, through UFL (interior facets from both sides' normals, boundary facets)."""
-    e, r = compat.Function(p.V_q), compat.Function(p.V_q)
+    e, r = fem.Function(p.V_q), fem.Function(p.V_q)
     e.x.array[:] = a - b
     r.x.array[:] = b
     n = ufl.FacetNormal(p.domain)
 
     def size(f):
         form = ((ufl.dot(f("+"), n("+"))) ** 2 * ufl.dS + ufl.dot(f, n) ** 2 * ufl.ds + ufl.dot(f, f) * ufl.dx)
-        return compat.assemble_scalar(compat.form(form), p.comm)
+        return compat.assemble_scalar(fem.form(form), p.comm)
 
     return math.sqrt(size(e) / size(r))
 
@@ -147,7 +147,7 @@ def _load_and_compare(path, comm) -> None:
     resume = checkpoint.check(path, cfg, comm)
     p = factory.problem(cfg, comm)
     st = time_stepper(p, cfg)
-    checkpoint.restore(resume, p, st, Untracked())
+    checkpoint.restore(resume, p, st, NoStabilityTest())
     k = _known(p)  # the same fields interpolated on this layout
     s = p.state.x.array
     du = np.abs(s[p.u_dofs] - k["state"][p.u_dofs]).max(initial=0.0)

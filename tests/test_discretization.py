@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 import ufl
 from conftest import small_bilayer
+from dolfinx import fem
 from petsc4py import PETSc
 
-from app import compat
-from app import factory
+from app import compat, factory
 
 
 def distorted_mesh(comm, n=6):
@@ -28,23 +28,23 @@ def _field(x):
 def test_rtcf_in_mixed_space_satisfies_divergence_theorem(comm):
     domain = distorted_mesh(comm)
     W = compat.mixed_displacement_flux_space(domain)
-    w = compat.Function(W)
+    w = fem.Function(W)
     _, q_dofs = compat.collapse(W.sub(1))
     rng = np.random.default_rng(7 + comm.rank)
     w.x.array[q_dofs] = rng.standard_normal(len(q_dofs))
     w.x.scatter_forward()
     _, Q = ufl.split(w)
     n = ufl.FacetNormal(domain)
-    lhs = compat.assemble_scalar(compat.form(ufl.div(Q) * ufl.dx), comm)
-    rhs = compat.assemble_scalar(compat.form(ufl.dot(Q, n) * ufl.ds), comm)
+    lhs = compat.assemble_scalar(fem.form(ufl.div(Q) * ufl.dx), comm)
+    rhs = compat.assemble_scalar(fem.form(ufl.dot(Q, n) * ufl.ds), comm)
     assert abs(lhs - rhs) < 1e-11 * max(1.0, abs(rhs))
     # cell-wise too: int_K div Q = int_dK Q.n for every cell K. Testing with the DG0 indicator v0 of
     # each cell, the boundary side collects every facet of K with K's own trace and outward normal
     # (interior facets from both sides, '+' and '-'; ghosted facets are summed by the reverse scatter).
     V0 = compat.scalar_space(domain, "DG", 0)
     v0 = ufl.TestFunction(V0)
-    vol = compat.assemble_vector(compat.form(ufl.div(Q) * v0 * ufl.dx))
-    surf = compat.assemble_vector(compat.form(
+    vol = compat.assemble_vector(fem.form(ufl.div(Q) * v0 * ufl.dx))
+    surf = compat.assemble_vector(fem.form(
         ufl.dot(Q, n) * v0 * ufl.ds
         + (ufl.dot(Q("+"), n("+")) * v0("+") + ufl.dot(Q("-"), n("-")) * v0("-")) * ufl.dS))
     n_owned = V0.dofmap.index_map.size_local
@@ -53,9 +53,9 @@ def test_rtcf_in_mixed_space_satisfies_divergence_theorem(comm):
     assert np.abs(vol - surf).max() < 1e-12 * np.abs(surf).max()  # measured 1.3e-15 abs (values ~3)
     # and the normal component is continuous (H(div)): Q.n seen from both sides cancels on every
     # interior facet (measured jump^2 integral 1e-29 against 3e2 for (Q.n)^2)
-    jump = compat.assemble_scalar(compat.form((ufl.dot(Q("+"), n("+")) + ufl.dot(Q("-"), n("-"))) ** 2 * ufl.dS),
+    jump = compat.assemble_scalar(fem.form((ufl.dot(Q("+"), n("+")) + ufl.dot(Q("-"), n("-"))) ** 2 * ufl.dS),
                                   comm)
-    size = compat.assemble_scalar(compat.form(ufl.dot(Q("+"), n("+")) ** 2 * ufl.dS), comm)
+    size = compat.assemble_scalar(fem.form(ufl.dot(Q("+"), n("+")) ** 2 * ufl.dS), comm)
     assert jump < 1e-24 * size
 
 
@@ -63,11 +63,11 @@ def test_mixed_rtcf_matches_plain_rtcf(comm):
     """Interpolating the same field into RTCF alone and into the mixed space gives the same flux."""
     domain = distorted_mesh(comm)
     W = compat.mixed_displacement_flux_space(domain)
-    w = compat.Function(W)
+    w = fem.Function(W)
     w.sub(1).interpolate(_field)
     w.x.scatter_forward()
     V = compat.rtcf_space(domain)
-    q = compat.Function(V)
+    q = fem.Function(V)
     q.interpolate(_field)
     _, Qm = ufl.split(w)
     n = ufl.FacetNormal(domain)
@@ -76,26 +76,26 @@ def test_mixed_rtcf_matches_plain_rtcf(comm):
     dx = ufl.dx(metadata={"quadrature_degree": 8})
     for expr in (lambda Q: ufl.dot(Q, Q) * dx, lambda Q: ufl.div(Q) ** 2 * dx,
                  lambda Q: ufl.dot(Q, n) * ufl.ds):
-        a = compat.assemble_scalar(compat.form(expr(Qm)), comm)
-        b = compat.assemble_scalar(compat.form(expr(q)), comm)
+        a = compat.assemble_scalar(fem.form(expr(Qm)), comm)
+        b = compat.assemble_scalar(fem.form(expr(q)), comm)
         assert a == pytest.approx(b, rel=1e-12, abs=1e-14)
     # mass matrices agree up to the dof permutation: compare permutation-invariant norms
-    Mm = compat.create_matrix(compat.form(ufl.dot(ufl.TrialFunction(W), ufl.TestFunction(W)) * ufl.dx))
-    compat.assemble_matrix_into(Mm, compat.form(ufl.dot(ufl.split(ufl.TrialFunction(W))[1],
+    Mm = compat.create_matrix(fem.form(ufl.dot(ufl.TrialFunction(W), ufl.TestFunction(W)) * ufl.dx))
+    compat.assemble_matrix_into(Mm, fem.form(ufl.dot(ufl.split(ufl.TrialFunction(W))[1],
                                                         ufl.split(ufl.TestFunction(W))[1]) * ufl.dx), [])
-    Mp = compat.create_matrix(compat.form(ufl.dot(ufl.TrialFunction(V), ufl.TestFunction(V)) * ufl.dx))
-    compat.assemble_matrix_into(Mp, compat.form(ufl.dot(ufl.TrialFunction(V), ufl.TestFunction(V)) * ufl.dx), [])
+    Mp = compat.create_matrix(fem.form(ufl.dot(ufl.TrialFunction(V), ufl.TestFunction(V)) * ufl.dx))
+    compat.assemble_matrix_into(Mp, fem.form(ufl.dot(ufl.TrialFunction(V), ufl.TestFunction(V)) * ufl.dx), [])
     assert Mm.norm(PETSc.NormType.FROBENIUS) == pytest.approx(Mp.norm(PETSc.NormType.FROBENIUS), rel=1e-12)
     # and the interpolant converges to the field (L2 error falls with h) on distorted meshes
     errs = []
     for nref in (4, 8, 16):
         d = distorted_mesh(comm, nref)
         Vr = compat.rtcf_space(d)
-        qr = compat.Function(Vr)
+        qr = fem.Function(Vr)
         qr.interpolate(_field)
         x = ufl.SpatialCoordinate(d)
         exact = ufl.as_vector([ufl.sin(2 * x[0]) + x[1] ** 2, ufl.cos(3 * x[1]) * x[0] + 0.3])
-        errs.append(np.sqrt(compat.assemble_scalar(compat.form(ufl.dot(qr - exact, qr - exact) * ufl.dx), comm)))
+        errs.append(np.sqrt(compat.assemble_scalar(fem.form(ufl.dot(qr - exact, qr - exact) * ufl.dx), comm)))
     rates = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
     assert (rates > 0.8).all(), rates
 

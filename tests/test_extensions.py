@@ -10,6 +10,7 @@ import pytest
 import ufl
 from cases import swelling_case
 from conftest import read_csv, run_to_end, small_bilayer
+from dolfinx import fem
 
 from app import compat, config, factory
 from app.model import history, loading, material
@@ -79,7 +80,7 @@ class SolidUptake:
             m, lam = p.mat, F[1, 1]
             s = ufl.det(F) * m.preswelling - 1 + m.shear_modulus / (m.penalty * m.preswelling) * (
                 m.preswelling ** (2 / 3) * lam - 1 / lam)
-            self._forms[id(p)] = compat.form(s * p.dx_coupling)  # one point per cell, as the penalty
+            self._forms[id(p)] = fem.form(s * p.dx_coupling)  # one point per cell, as the penalty
         return {"solid_uptake_mm2": compat.assemble_scalar(self._forms[id(p)], p.comm)}
 
 

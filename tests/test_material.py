@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 import ufl
+from dolfinx import fem
 from mpi4py import MPI
 from scipy.optimize import brentq
 
@@ -23,9 +24,9 @@ PAPER = dict(mixing_modulus=24.2, penalty=10.0, mobility=1e-4, preswelling=1.01,
 def _evaluate(expr_of, mat, F_values, s_value):
     """Evaluate a UFL expression of (mat, F, s) with UFL-differentiable variables on a 1-cell mesh."""
     domain = compat.rectangle_quads(MPI.COMM_SELF, (0, 0), (1, 1), (1, 1))
-    F = ufl.variable(ufl.as_matrix([[compat.Constant(domain, float(v)) for v in row] for row in F_values]))
-    s = ufl.variable(compat.Constant(domain, float(s_value)))
-    return compat.assemble_scalar(compat.form(expr_of(mat, F, s) * ufl.dx(domain=domain)), MPI.COMM_SELF)
+    F = ufl.variable(ufl.as_matrix([[fem.Constant(domain, float(v)) for v in row] for row in F_values]))
+    s = ufl.variable(fem.Constant(domain, float(s_value)))
+    return compat.assemble_scalar(fem.form(expr_of(mat, F, s) * ufl.dx(domain=domain)), MPI.COMM_SELF)
 
 
 @pytest.mark.parametrize("gamma,J0", [(0.1, 1.01), (0.8, 1.01), (0.1, 1.5), (2.0, 1.2)])

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 import ufl
+from dolfinx import fem
 
 from app import compat
 from app.geometry.bilayer import tagged_mesh
@@ -10,8 +11,8 @@ from meshes import bilayer
 
 
 def _measure(tm, comm, dim_measure):
-    one = compat.Constant(tm.mesh, 1.0)
-    return compat.assemble_scalar(compat.form(one * dim_measure), comm)
+    one = fem.Constant(tm.mesh, 1.0)
+    return compat.assemble_scalar(fem.form(one * dim_measure), comm)
 
 
 @pytest.mark.parametrize("grading", [1.0, 1.15, 1.4])

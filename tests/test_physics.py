@@ -5,6 +5,7 @@ and the Terzaghi-type early-time behaviour (growth and inflow) through the error
 import numpy as np
 import pytest
 from conftest import run_to_end, small_bilayer, time_stepper
+from dolfinx import fem
 from mpi4py import MPI
 from scipy.optimize import brentq
 
@@ -29,8 +30,7 @@ def test_fluid_taken_up_by_the_solid_equals_the_inflow_through_the_top(comm):
     measured wrongly, if Newton stops short, or if the mechanics does not follow the fluid."""
     import ufl
 
-    from app import compat
-    from app import factory
+    from app import compat, factory
 
     cfg = small_bilayer(**{"time.end": 1.2})
     p = factory.problem(cfg, comm)
@@ -40,7 +40,7 @@ def test_fluid_taken_up_by_the_solid_equals_the_inflow_through_the_top(comm):
     m = p.mat
     J0, lam = m.preswelling, F[1, 1]
     s_of_u = ufl.det(F) * J0 - 1 + m.shear_modulus / (m.penalty * J0) * (J0 ** (2 / 3) * lam - 1 / lam)
-    uptake_form = compat.form(s_of_u * p.dx_coupling)  # one point per cell, as the penalty
+    uptake_form = fem.form(s_of_u * p.dx_coupling)  # one point per cell, as the penalty
     ux = p.u_dofs[0::2]
     rows = [st.initial_record()]
     v_u0 = compat.assemble_scalar(uptake_form, comm)

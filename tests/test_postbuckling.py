@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import read_json, write_on_rank0
+from dolfinx import fem
 from mpi4py import MPI
 
 from app import compat, config
@@ -554,9 +555,9 @@ def test_a_tube_branch_is_followed_around_its_closed_passage(monkeypatch, tmp_pa
     runs to time.end without a fold, keeps the switched mode's count, and its amplitude (the radial profile
     without its n = 0 and n = 1 Fourier parts) equals the geometric one (distance from the least-squares
     circle through the deformed passage) and ignores a rigid translation of the state."""
-    from app.onset.contact import ModelLimits
-
     from cases import SMALL_TUBE
+
+    from app.onset.contact import ModelLimits
 
     states = []
     check = ModelLimits.accepted
@@ -640,9 +641,9 @@ def test_drained_switch_leaves_the_chemical_potential_unperturbed(monkeypatch, t
     p.state.x.array[:] = seen["before"]
     p.w.x.array[:] = 0.0
     p.w.x.array[p.u_dofs] = seen["before"][p.u_dofs]  # the state itself: w = (u, dQ = 0)
-    direction = compat.Function(p.W)
+    direction = fem.Function(p.W)
     V0 = compat.scalar_space(p.domain, "DG", 0)
-    dmu = compat.Function(V0)
+    dmu = fem.Function(V0)
     n_owned = compat.num_owned_cells(p.domain)
 
     def norm_of_delta_mu(d: np.ndarray) -> float:

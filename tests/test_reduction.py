@@ -21,15 +21,15 @@ import numpy as np
 import pytest
 import ufl
 from conftest import EXE, child_env, child_jobs, long_physics, on_rank0, rank_local
+from dolfinx import fem
 from scipy.optimize import brentq
 
-from app import compat, config
+from app import compat, config, factory
+from app.factory import layer_materials
 from app.model import theory
 from app.model.hydrogel import HYDROGEL
-from app.factory import layer_materials
 from app.reduced.halfspace import HalfSpace
 from app.reduced.onset import Screen, Stability, margin_curve, mode_grid
-from app import factory
 from app.reduced.solve import n_max
 from app.reduced.transient import LayeredModel, Resolution, Transient
 from app.workflows import reduced
@@ -66,7 +66,7 @@ def test_steady_state_is_the_laterally_constrained_equilibrium():
     tr.run(2000.0)
     V0 = compat.scalar_space(m.domain, "DG", 0)
     u, q = ufl.split(m.state)
-    lam, s = compat.Function(V0), compat.Function(V0)
+    lam, s = fem.Function(V0), fem.Function(V0)
     lam.interpolate(compat.expression(1.0 + u.dx(0), V0))
     s.interpolate(compat.expression(m.mat.s0 - m.div(q), V0))
     mid = compat.dof_coordinates(V0)

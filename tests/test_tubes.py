@@ -9,22 +9,22 @@ import pytest
 import ufl
 from cases import SMALL_TUBE, SWELLING, tube_case
 from conftest import time_stepper
+from dolfinx import fem
 from scipy.spatial import cKDTree
 
-from app import compat, config, geometry
-from app import factory
-from app.workflows.run import simulate
-from app.model.surface import boundary_displacement
+from app import compat, config, factory, geometry
 from app.geometry import bilayer, msh, tube
+from app.model.surface import boundary_displacement
+from app.workflows.run import simulate
 from meshes import tube as tube_model
 
 
 def _areas(tm, comm):
     dx = ufl.Measure("dx", domain=tm.mesh, subdomain_data=tm.cell_tags)
     ds = ufl.Measure("ds", domain=tm.mesh, subdomain_data=tm.facet_tags)
-    one = compat.Constant(tm.mesh, 1.0)
-    A = {n: compat.assemble_scalar(compat.form(one * dx(t)), comm) for n, t in tm.cell_names.items()}
-    A.update({n: compat.assemble_scalar(compat.form(one * ds(t)), comm) for n, t in tm.facet_names.items()})
+    one = fem.Constant(tm.mesh, 1.0)
+    A = {n: compat.assemble_scalar(fem.form(one * dx(t)), comm) for n, t in tm.cell_names.items()}
+    A.update({n: compat.assemble_scalar(fem.form(one * ds(t)), comm) for n, t in tm.facet_names.items()})
     return A
 
 
@@ -69,7 +69,7 @@ def _uptake_mismatch(cfg, comm) -> np.ndarray:
     p = factory.problem(cfg, comm)
     st = time_stepper(p, cfg)
     u_n, _ = ufl.split(p.state)
-    form = compat.form((ufl.det(ufl.Identity(2) + ufl.grad(u_n)) * p.mat.preswelling - 1) * p.dx_coupling)
+    form = fem.form((ufl.det(ufl.Identity(2) + ufl.grad(u_n)) * p.mat.preswelling - 1) * p.dx_coupling)
     v0 = compat.assemble_scalar(form, comm)
     out = []
     while not st.done():

@@ -266,7 +266,7 @@ class DofLayout:
 # --- writing ---------------------------------------------------------------------------------------
 
 
-class _Sink:
+class _ZipWriter:
     """Rank 0's zip file; collects the first error instead of raising (the gathers must go on)."""
 
     def __init__(self, path: Path):
@@ -311,7 +311,7 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, pr
     rank0 = comm.rank == 0
     final = Path(outdir) / FILE
     tmp = final.with_name(FILE + ".tmp")
-    sink = _Sink(tmp) if rank0 else None
+    sink = _ZipWriter(tmp) if rank0 else None
     stored = layout.keys()
     if rank0:
         for name, a in zip(("u_key", "x", "q_key"), stored):

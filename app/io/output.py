@@ -17,12 +17,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from dolfinx import fem
+from mpi4py import MPI
 
 from app import compat, config, timing
 from app.io import writes
 from app.io.writes import ResultWriteError
-from app.io.xdmf import ballast_path
+from app.io.xdmf import FieldSeries, ballast_path
 from app.model.fields import fields_for, state_of
+from app.model.surface import boundary_displacement, shape_of
 
 MODE_FILES = ("mode.xdmf", "mode.h5", "mode.png", "mode_surface.csv")  # written at the first crossing
 CHECKPOINT_FILES = ("checkpoint.npz", "checkpoint.npz.tmp")  # app.io.checkpoint
@@ -187,8 +190,6 @@ class ResultWriter:
         """Compile the post-processing expressions once (:mod:`app.model.fields`), if fields are written."""
         if not self.settings.fields or self.error is not None:
             return
-        from app.io.xdmf import FieldSeries
-
         domain = problem.domain
         try:
             self._xdmf = FieldSeries(self.comm, self.outdir / "fields.xdmf", domain, "fields")
@@ -197,19 +198,19 @@ class ResultWriter:
             return
         self._fields = []
         for name, space, expr in field_expressions(problem):
-            f = compat.Function(space)
+            f = fem.Function(space)
             f.name = name
             self._fields.append((f, compat.expression(expr, space)))
         if problem.contact is not None:  # the self-contact's traction on the surface nodes [MPa]
-            f = compat.Function(compat.vector_space(domain, "Lagrange", 1))  # the displacement's output space
+            f = fem.Function(compat.vector_space(domain, "Lagrange", 1))  # the displacement's output space
             f.name = "contact_traction"
-            on_u = compat.Function(problem.V_u)  # the traction where the solver's dofs are, then interpolated
+            on_u = fem.Function(problem.V_u)  # the traction where the solver's dofs are, then interpolated
 
             def fill(target, state=problem.state, contact=problem.contact):
                 contact.traction_into(on_u, state.x.array)
                 compat.interpolate(target, on_u)
 
-            self._fields.append((f, _Filled(fill)))
+            self._fields.append((f, _ComputedField(fill)))
 
     def write_fields(self, t: float, step: int = 0, last: bool = False) -> None:
         """The fields at time t, if they are written at accepted step number ``step`` (every
@@ -219,7 +220,7 @@ class ResultWriter:
         self._fields_step = step
         with timing.timed("output"):
             for f, expr in self._fields:
-                if isinstance(expr, _Filled):  # a field that is not a UFL expression (the contact traction)
+                if isinstance(expr, _ComputedField):  # a field that is not a UFL expression (the contact traction)
                     expr.fill(f)
                 else:
                     compat.interpolate(f, expr)
@@ -243,17 +244,15 @@ class ResultWriter:
         """mode.xdmf (mode displacement normalized to max |u| = 1, and the state it buckles from)
         and mode.png (the deformed surface region with the mode superposed)."""
         Vu, u_dofs = problem.V_u, problem.u_dofs
-        mode = compat.Function(Vu)
+        mode = fem.Function(Vu)
         mode.name = "mode"
         mode.x.array[:] = crossing.mode[u_dofs]
         peak = self.comm.allreduce(float(abs(mode.x.array).max()) if mode.x.array.size else 0.0, op=_max())
         if peak > 0:
             mode.x.array[:] /= peak
-        base = compat.Function(Vu)
+        base = fem.Function(Vu)
         base.name = "critical_displacement"
         base.x.array[:] = crossing.state[u_dofs]
-        from app.io.xdmf import FieldSeries
-
         try:
             with FieldSeries(self.comm, self.outdir / "mode.xdmf", problem.domain, "mode") as f:
                 f.write([base, mode], crossing.time)
@@ -261,8 +260,6 @@ class ResultWriter:
             self._record(err)
         three_d = problem.domain.geometry.dim == 3
         polys = None if three_d else _gather_cells(problem, base.x.array, mode.x.array)
-        from app.model.surface import boundary_displacement, shape_of
-
         groups = problem.geo.facets_with_role("permeable")
         coords, disp = boundary_displacement(problem, crossing.mode, groups)
         _, state_disp = boundary_displacement(problem, crossing.state, groups)
@@ -354,7 +351,7 @@ class ResultWriter:
             self._history = None
 
 
-class _Filled:
+class _ComputedField:
     """A field computed outside UFL: ``fill(f)`` writes it into the Function f."""
 
     def __init__(self, fill):
@@ -379,15 +376,11 @@ def field_expressions(problem):
 
 
 def _max():
-    from mpi4py import MPI
-
     return MPI.MAX
 
 
 def _gather_cells(problem, base: np.ndarray, mode: np.ndarray):
     """On rank 0: (vertex coordinates, base displacement, mode) per owned cell, polygon-ordered."""
-    import numpy as np
-
     V = problem.V_u
     X = V.tabulate_dof_coordinates()[:, :2]
     n_cells = compat.num_owned_cells(problem.domain)

@@ -39,8 +39,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from app.model.contact_surface import (CONTACT_ROLES, KAPPA_MAX, STIFFEN, ContactTerms, Facet,  # noqa: F401
-                                        GatheredSurface, connected_groups)
+from app.model.contact_surface import (  # noqa: F401
+    CONTACT_ROLES,
+    KAPPA_MAX,
+    STIFFEN,
+    ContactTerms,
+    Facet,
+    GatheredSurface,
+    connected_groups,
+)
 
 REACH = 0.5  # a point is paired with a segment it has passed by at most this times the segment's length
 OVERLAP = 1e-3  # the tunnel check: a segment's projection range [0, 1] widened by this at each end
@@ -181,7 +188,7 @@ class SelfContact:
         self.joint_depth = reach * np.minimum(L[J], L[K])
 
     @property
-    def k(self) -> np.ndarray:
+    def point_stiffness(self) -> np.ndarray:
         """Each point's stiffness: kappa mu times its weight."""
         return self.stiffness * self.weight
 
@@ -236,7 +243,7 @@ class SelfContact:
             at_joint.append(False)
         gaps = np.asarray(gaps, float)
         points = np.asarray(points, np.int64)
-        energy = float(0.5 * np.sum(self.k[points] * gaps**2)) if len(points) else 0.0
+        energy = float(0.5 * np.sum(self.point_stiffness[points] * gaps**2)) if len(points) else 0.0
         return ContactState(energy, points, np.asarray(segs, np.int64), gaps, np.asarray(at_joint, bool))
 
     def _projections(self, xp, a, t, L, n):
@@ -304,7 +311,7 @@ class SelfContact:
         xp = self.points(u)
         grad = np.zeros(2 * len(self.X))
         blocks = []
-        k = self.k
+        k = self.point_stiffness
         for p, j, corner in zip(state.points, state.segments, state.at_joint):
             ia, ib = self.segments[j]
             c, d = self.ends[p]

@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from dolfinx import fem
 
 from app import compat
 
@@ -192,11 +193,11 @@ class GatheredSurface:
         stability criteria's own spaces: the numbering is carried over by interpolating entry numbers (P1
         to P1 on one mesh: node to node, slits included)."""
         p = self.p
-        number = compat.Function(p.V_u)
+        number = fem.Function(p.V_u)
         number.x.array[:] = -1.0
         number.x.array[self._mine_in_u] = self._mine.astype(float)
         compat.scatter_forward(number)
-        there = compat.Function(V)
+        there = fem.Function(V)
         compat.interpolate(there, number)
         values = np.rint(there.x.array[:compat.owned_size(V)]).astype(np.int64)
         local = np.flatnonzero(values >= 0)

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 import ufl
+from dolfinx import fem
 
 from app import compat
 from app.model.kinematics import deformation_gradient
@@ -80,9 +81,9 @@ class FrozenFluid:
         term = mirror_term(p, ufl.split(p.w)[0], mirror)
         residual = p.pot.residual + ufl.derivative(term, p.w, ufl.TestFunction(p.W))
         hessian = ufl.derivative(residual, p.w, ufl.TrialFunction(p.W))
-        self.energy, self.residual, self.hessian = (compat.form(p.pot.energy + term), compat.form(residual),
-                                                    compat.form(hessian))
-        self._mirror = compat.form(term)
+        self.energy, self.residual, self.hessian = (fem.form(p.pot.energy + term), fem.form(residual),
+                                                    fem.form(hessian))
+        self._mirror = fem.form(term)
 
     def set_load(self, t: float) -> None:
         self.problem.set_time(t, 1.0)
@@ -118,8 +119,8 @@ class DrainedEquilibrium:
         p = self.problem = problem
         self.fluid = fluid
         self.space = compat.mixed_displacement_content_space(p.domain)
-        self.w = compat.Function(self.space)  # (u, c): the stress-free reference state at c = 0
-        self.mu_bar = compat.Constant(p.domain, compat.ScalarType(p.loading.mu_bar(0.0)))
+        self.w = fem.Function(self.space)  # (u, c): the stress-free reference state at c = 0
+        self.mu_bar = fem.Constant(p.domain, compat.ScalarType(p.loading.mu_bar(0.0)))
         u, c = ufl.split(self.w)
         bulk, constraint = p.mat.law.free_energy(deformation_gradient(u), p.mat.s0 + c, p.mat)
         G = (bulk - self.mu_bar * c) * p.dx + constraint * p.dx_coupling
@@ -127,8 +128,8 @@ class DrainedEquilibrium:
             G = G + mirror_term(p, u, mirror)
         v, dv = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
         residual = ufl.derivative(G, self.w, v)
-        self.energy, self.residual = compat.form(G), compat.form(residual)
-        self.hessian = compat.form(ufl.derivative(residual, self.w, dv))
+        self.energy, self.residual = fem.form(G), fem.form(residual)
+        self.hessian = fem.form(ufl.derivative(residual, self.w, dv))
         self.bcs = p.fixed_displacement_conditions(self.space.sub(0))
         self.displacement = self.space.sub(0)
         self._V_u, self._u_dofs = compat.collapse(self.space.sub(0))

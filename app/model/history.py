@@ -3,7 +3,7 @@
 A group (:class:`Observables`) names its columns and computes them together from a problem's converged state at
 time t (one surface gather gives both the amplitude and the wrinkle count); ``applies`` says whether a problem
 has them (the contact columns only with self-contact). :func:`record` is what the time stepper calls for each
-accepted state (through :class:`app.solvers.stepping.Evolution`'s ``observables`` hook), :func:`columns` what
+accepted state (through :class:`app.solvers.stepping.SteppedProblem`'s ``observables`` hook), :func:`columns` what
 the result writer lists. The time stepper adds its own columns (step, time, dt, Newton iterations, inflow,
 error estimate) and the onset tracker its own (the inertia, lambda_min); neither knows these.
 

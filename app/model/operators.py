@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
+from dolfinx import fem
 
 from app import compat
 from app.model.kinematics import deformation_gradient, fluid_content
@@ -61,16 +62,16 @@ def zero_increment_hessian(problem, tau: float) -> OwnHessian:
     mu_bar), so the form has the problem's form signature: the same compiled kernel (JIT cache hit) and a K
     identical to the one assembled from the problem's own coefficients, bit for bit."""
     p = problem
-    work, state = compat.Function(p.W), compat.Function(p.W)
+    work, state = fem.Function(p.W), fem.Function(p.W)
     fields = {}
     for f in dataclasses.fields(p.mat):  # whatever record of per-cell fields the material law has
         source = getattr(p.mat, f.name)
-        fields[f.name] = compat.Function(source.function_space)
+        fields[f.name] = fem.Function(source.function_space)
         fields[f.name].x.array[:] = source.x.array
-    tau_c = compat.Constant(p.domain, compat.ScalarType(tau))
-    mu_bar = compat.Constant(p.domain, compat.ScalarType(0.0))  # does not enter K (linear in dQ)
+    tau_c = fem.Constant(p.domain, compat.ScalarType(tau))
+    mu_bar = fem.Constant(p.domain, compat.ScalarType(0.0))  # does not enter K (linear in dQ)
     pot = build(work, state, type(p.mat)(**fields), tau_c, mu_bar, p.dx, p.surface_measure, p.dx_coupling)
-    return OwnHessian(compat.form(pot.hessian), work, state, tau_c, p.W, p.bcs, p.u_dofs, p.state, tau,
+    return OwnHessian(fem.form(pot.hessian), work, state, tau_c, p.W, p.bcs, p.u_dofs, p.state, tau,
                       getattr(p, "contact", None))
 
 
@@ -82,8 +83,8 @@ class DrainedHessian:
     def __init__(self, problem):
         p = self.problem = problem
         self.space = compat.mixed_displacement_content_space(p.domain)
-        self.work = compat.Function(self.space)  # (u, c): u = u_n, c = 0
-        self.state = compat.Function(p.W)  # (u_n, Q_n)
+        self.work = fem.Function(self.space)  # (u, c): u = u_n, c = 0
+        self.state = fem.Function(p.W)  # (u_n, Q_n)
         u, c = ufl.split(self.work)
         _, Q_n = ufl.split(self.state)
         F = deformation_gradient(u)
@@ -91,7 +92,7 @@ class DrainedHessian:
         bulk, constraint = p.mat.law.free_energy(F, s, p.mat)
         energy = bulk * p.dx + constraint * p.dx_coupling
         v, dv = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
-        self.form = compat.form(ufl.derivative(ufl.derivative(energy, self.work, v), self.work, dv))
+        self.form = fem.form(ufl.derivative(ufl.derivative(energy, self.work, v), self.work, dv))
         self.bcs = p.fixed_displacement_conditions(self.space.sub(0))
         self._V_u, self.u_dofs = compat.collapse(self.space.sub(0))
         _, self.c_dofs = compat.collapse(self.space.sub(1))
@@ -107,9 +108,9 @@ class DrainedHessian:
         p = self.problem
         s = p.state.x.array
         self.state.x.array[:] = s
-        u = compat.Function(p.V_u)
+        u = fem.Function(p.V_u)
         u.x.array[:] = s[p.u_dofs]
-        ud = compat.Function(self._V_u)
+        ud = fem.Function(self._V_u)
         compat.interpolate(ud, u)
         self.work.x.array[:] = 0.0
         self.work.x.array[self.u_dofs] = ud.x.array
@@ -123,9 +124,9 @@ class DrainedHessian:
 def displacement_in_problem_space(problem, V_u, u_dofs: np.ndarray, values: np.ndarray) -> np.ndarray:
     """The displacement of a (u, c) array (``V_u`` its collapsed Q1 space, ``u_dofs`` their places in it) as
     the problem's local array of W: Q1 to Q1 on one mesh, node for node; the flux part zero."""
-    ud = compat.Function(V_u)
+    ud = fem.Function(V_u)
     ud.x.array[:] = values[u_dofs]
-    u = compat.Function(problem.V_u)
+    u = fem.Function(problem.V_u)
     compat.interpolate(u, ud)
     out = np.zeros_like(problem.state.x.array)
     out[problem.u_dofs] = u.x.array
@@ -147,10 +148,10 @@ class CellContentChange:
 def cell_content_change(problem) -> CellContentChange:
     V0 = compat.scalar_space(problem.domain, "DG", 0)
     v0 = ufl.TestFunction(V0)
-    work = compat.Function(problem.W)
+    work = fem.Function(problem.W)
     _, dQ = ufl.split(work)
-    form = compat.form(ufl.div(dQ) * v0 * ufl.dx)
-    area = compat.assemble_vector(compat.form(v0 * ufl.dx))
+    form = fem.form(ufl.div(dQ) * v0 * ufl.dx)
+    area = compat.assemble_vector(fem.form(v0 * ufl.dx))
     cells = area.array.copy()
     area.destroy()
     return CellContentChange(form, work, cells)

@@ -18,8 +18,8 @@ import functools
 from dataclasses import dataclass
 
 import ufl
+from dolfinx import fem
 
-from app import compat
 from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.material import chemical_potential
 
@@ -86,6 +86,6 @@ class CompiledForms:
     """JIT-compiled residual and Hessian (compiled once per problem, reused every step)."""
 
     def __init__(self, pot: Potential):
-        self.residual = compat.form(pot.residual)
-        self.hessian = compat.form(pot.hessian)
-        self.energy = compat.form(pot.energy)
+        self.residual = fem.form(pot.residual)
+        self.hessian = fem.form(pot.hessian)
+        self.energy = fem.form(pot.energy)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
+from dolfinx import fem
 
 from app import compat
 from app.geometry import GeometrySetup
@@ -21,7 +22,7 @@ from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.loading import BoundaryConditions, Loading
 from app.model.material import Material
 from app.model.potential import CompiledForms, build, fields_class
-from app.model.surface import GROWTH
+from app.model.surface import GROWTH, surface_shape
 
 
 @dataclass(frozen=True)
@@ -48,17 +49,17 @@ class Problem:
         domain.topology.create_connectivity(tdim - 1, tdim)
 
         self.W = compat.mixed_displacement_flux_space(domain)
-        self.w = compat.Function(self.W)  # (u, dQ) of the current step
-        self.state = compat.Function(self.W)  # (u_n, Q_n): converged previous state
+        self.w = fem.Function(self.W)  # (u, dQ) of the current step
+        self.state = fem.Function(self.W)  # (u_n, Q_n): converged previous state
         self.V_u, self.u_dofs = compat.collapse(self.W.sub(0))
         self.V_q, self.q_dofs = compat.collapse(self.W.sub(1))
 
         self.materials = materials
         self.mat = self._material_fields()
 
-        self.tau = compat.Constant(domain, compat.ScalarType(discretization.initial_step))
+        self.tau = fem.Constant(domain, compat.ScalarType(discretization.initial_step))
         self.loading = loading
-        self.mu_bar = compat.Constant(domain, compat.ScalarType(self.loading.mu_bar(0.0)))
+        self.mu_bar = fem.Constant(domain, compat.ScalarType(self.loading.mu_bar(0.0)))
 
         self.dx = ufl.Measure("dx", domain=domain, metadata={"quadrature_degree": discretization.quadrature_degree})
         self.dx_coupling = ufl.Measure("dx", domain=domain, metadata={
@@ -97,7 +98,7 @@ class Problem:
         V0 = compat.scalar_space(self.domain, "DG", 0)
         fields = {}
         for name in (*law.params, "s0"):
-            f = compat.Function(V0)
+            f = fem.Function(V0)
             f.name = name
             for group, mat_name in self.geo.layers.items():
                 mat = self.materials[mat_name]
@@ -159,14 +160,14 @@ class Problem:
         u_n, Q_n = ufl.split(self.state)
         _, dQ = ufl.split(self.w)
         n = ufl.FacetNormal(self.domain)
-        one = compat.Constant(self.domain, compat.ScalarType(1.0))
-        self.surface_length = compat.assemble_scalar(compat.form(one * self.ds_permeable), self.comm)
-        self._fluid_form = compat.form(fluid_content(self.mat.s0, Q_n) * self.dx)
-        self._influx_form = compat.form(-ufl.dot(dQ, n) * self.ds_permeable)
+        one = fem.Constant(self.domain, compat.ScalarType(1.0))
+        self.surface_length = compat.assemble_scalar(fem.form(one * self.ds_permeable), self.comm)
+        self._fluid_form = fem.form(fluid_content(self.mat.s0, Q_n) * self.dx)
+        self._influx_form = fem.form(-ufl.dot(dQ, n) * self.ds_permeable)
         # the stored energy of the converged state (the incremental potential without dissipation and load)
         F_n = deformation_gradient(u_n)
         bulk, constraint = self.mat.law.free_energy(F_n, fluid_content(self.mat.s0, Q_n), self.mat)
-        self._stored_form = compat.form(bulk * self.dx + constraint * self.dx_coupling)
+        self._stored_form = fem.form(bulk * self.dx + constraint * self.dx_coupling)
         self._growth = GROWTH.get(self.geo.growth).bind(self)  # the measure the geometry kind names
 
     # --- time-dependent data ---------------------------------------------------------------
@@ -193,8 +194,6 @@ class Problem:
     def surface_shape(self, array=None) -> tuple[float, float]:
         """(amplitude [mm], wrinkle count) of the permeable surface's shape in ``array`` (default: the converged
         state); :func:`app.model.surface.surface_shape`."""
-        from app.model.surface import surface_shape
-
         return surface_shape(self, self.state.x.array if array is None else array)
 
     def fluid_volume(self) -> float:

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from dolfinx import fem
 
 from app import compat
 from app.registry import Registry
@@ -459,7 +460,7 @@ class MeanNormal(GrowthMeasure):
         import ufl
 
         u_n, _ = ufl.split(problem.state)
-        form = compat.form(ufl.dot(u_n, ufl.FacetNormal(problem.domain)) * problem.ds_permeable)
+        form = fem.form(ufl.dot(u_n, ufl.FacetNormal(problem.domain)) * problem.ds_permeable)
         return lambda: compat.assemble_scalar(form, problem.comm) / problem.surface_length
 
 

@@ -21,10 +21,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import ufl
+from dolfinx import fem
 
 from app import compat
 from app.model.operators import zero_increment_hessian
-from app.model.surface import surface_profile, surface_shape
+from app.model.patterns import shape_coefficient, surface_spectrum
+from app.model.surface import shape_of, surface_profile, surface_shape
 from app.solvers.stability import HessianOperator, solve_with_held
 
 TAU_FACTOR = 1e8  # the flux of a content change: tau = this x (elapsed time + ramp scale), see the docstring
@@ -49,10 +52,8 @@ class Switch:
 def typical_cell_size(problem) -> float:
     """sqrt(area / cells) of the mesh as its file has it: a .msh mesh split by mesh.refinements keeps the
     file's cell size, so the imperfection is the same on every level of a refinement study."""
-    import ufl
-
-    one = compat.Constant(problem.domain, compat.ScalarType(1.0))
-    area = compat.assemble_scalar(compat.form(one * ufl.dx(domain=problem.domain)), problem.comm)
+    one = fem.Constant(problem.domain, compat.ScalarType(1.0))
+    area = compat.assemble_scalar(fem.form(one * ufl.dx(domain=problem.domain)), problem.comm)
     return float(np.sqrt(area / problem.cells())) * 2.0 ** problem.tm.info.get("refinements", 0)
 
 
@@ -117,9 +118,6 @@ class BranchSwitcher:
         the pure shape (i, j) (:func:`app.model.patterns.shape_coefficient`: the combination weighted by each
         mode's coefficient on it), scaled to unit surface amplitude, and these summed. A shape the crossing
         modes do not contain (less than half of it) is left out, with a log line."""
-        from app.model.patterns import shape_coefficient, surface_spectrum
-        from app.model.surface import shape_of
-
         p = self.p
         if not self.modes:
             return oriented(p, crossing.mode)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
+from dolfinx import fem
 from mpi4py import MPI
 
 from app import compat
@@ -22,7 +23,6 @@ from app.model.contact import GAP_LIMIT, crossing_segments
 from app.model.kinematics import deformation_gradient
 from app.model.surface import boundary_displacement, shape_of
 from app.solvers.stepping import ModelLimit
-
 
 NO_CONTACT = ("without stability.contact the surface may pass through itself and no element may invert, the "
               "branch cannot be followed further")
@@ -88,8 +88,8 @@ class InversionCheck:
     def __init__(self, problem):
         self.p = problem
         self.V0 = compat.scalar_space(problem.domain, "DG", 0)
-        self._u = compat.Function(problem.V_u)
-        self._J = compat.Function(self.V0)
+        self._u = fem.Function(problem.V_u)
+        self._J = fem.Function(self.V0)
         self._expr = compat.expression(ufl.det(deformation_gradient(self._u)), self.V0)
         self._mid = None
 

@@ -23,9 +23,14 @@ from __future__ import annotations
 
 import numpy as np
 import ufl
+from dolfinx import fem
+from mpi4py import MPI
 
 from app import compat
 from app.geometry import dofmaps
+from app.model.material import chemical_potential, first_piola
+from app.model.potential import fields_class
+from app.reduced.halfspace import HalfSpace
 from app.solvers.local import LocalSystem
 
 
@@ -35,8 +40,6 @@ class SurfaceCheck:
     def __init__(self, problem, criterion):
         """``criterion``: the run's :class:`app.onset.criteria.Criterion`; the check uses its short-wave
         counterpart (``criterion.surface``: drained or undrained)."""
-        from app.reduced.halfspace import HalfSpace
-
         p = problem
         self.problem, self.comm, self.criterion = p, p.comm, criterion.surface
         self._label = criterion.surface_label()
@@ -195,11 +198,6 @@ class SurfaceState:
     the last solution."""
 
     def __init__(self, materials: list, dim: int = 2):
-        from mpi4py import MPI
-
-        from app.model.material import chemical_potential, first_piola
-        from app.model.potential import fields_class
-
         n = len(materials)
         self.dim = dim
         law = materials[0].law
@@ -208,16 +206,16 @@ class SurfaceState:
         at = np.argsort(compat.dof_coordinates(V0))  # dof of point k (cell k spans [k, k + 1])
         fields = {}
         for name in (*law.params, "s0"):
-            f = compat.Function(V0)
+            f = fem.Function(V0)
             f.x.array[at] = [getattr(m, name) for m in materials]
             fields[name] = f
         mat = fields_class(law)(**fields)
         tangents = dim - 1
-        self.c = [[compat.Function(V0) for _ in range(tangents)] for _ in range(dim)]  # c[row][column]
+        self.c = [[fem.Function(V0) for _ in range(tangents)] for _ in range(dim)]  # c[row][column]
         self.at = at
-        self.mu_bar = compat.Constant(d, compat.ScalarType(0.0))
+        self.mu_bar = fem.Constant(d, compat.ScalarType(0.0))
         W = compat.mixed_dg0_space(d, dim + 1)
-        self.w = compat.Function(W)
+        self.w = fem.Function(W)
         parts = ufl.split(self.w)
         a, s = parts[:dim], parts[dim]
         F = ufl.as_matrix([[*self.c[i], a[i]] for i in range(dim)])
@@ -226,7 +224,7 @@ class SurfaceState:
         v = ufl.TestFunction(W)
         dx = ufl.Measure("dx", domain=d, metadata={"quadrature_degree": 1})
         res = (sum(P[i, dim - 1] * v[i] for i in range(dim)) + (mu - self.mu_bar) * v[dim]) * dx
-        self.system = LocalSystem(compat.form(res), compat.form(ufl.derivative(res, self.w, ufl.TrialFunction(W))))
+        self.system = LocalSystem(fem.form(res), fem.form(ufl.derivative(res, self.w, ufl.TrialFunction(W))))
         self.dofs = []
         for i in range(dim + 1):
             Vi, dofs = compat.collapse(W.sub(i))

@@ -6,20 +6,21 @@ every ``eigen_every`` steps) and records it with the step; :meth:`OnsetTracker.r
 every new crossing by bisection, records it, hands the first one's mode to the writer, and applies
 the :class:`~app.onset.policy.CrossingPolicy`, whose answer ends the run or not. The tracker leaves the
 stepper at the state the run continues from. With ``stability.enabled = false`` the run gets an
-:class:`Untracked` that does none of this.
+:class:`NoStabilityTest` that does none of this.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-
+from app.model.surface import shape_of
 from app.onset.bisection import Bisection
-from app.onset.policy import AfterCrossing, CrossingPolicy
-from app.onset.screening import StabilityScreen
+from app.onset.branching import BranchSwitcher, typical_cell_size
 from app.onset.criteria import CRITERIA, DEFAULT, Criterion
 from app.onset.crossing import Crossing
-from app.model.surface import shape_of
+from app.onset.policy import AfterCrossing, CrossingPolicy
+from app.onset.screening import StabilityScreen
+from app.onset.surface import SurfaceCheck
 
 
 @dataclass(frozen=True)
@@ -50,10 +51,10 @@ class StabilitySettings:
 
 def onset_tracker(problem, stepper, settings: StabilitySettings, on_first_crossing=None, log=None, detail=None,
                   reference_length: float | None = None):
-    """The tracker a run with these settings needs (:class:`Untracked` when the test is off).
+    """The tracker a run with these settings needs (:class:`NoStabilityTest` when the test is off).
     ``reference_length``: what stability.imperfection is a fraction of (app.factory.reference_length)."""
     if not settings.enabled:
-        return Untracked()
+        return NoStabilityTest()
     return OnsetTracker(problem, stepper, settings, on_first_crossing, log, detail, reference_length)
 
 
@@ -85,12 +86,8 @@ class OnsetTracker:
         self.surface_onset: dict | None = None
         if settings.surface_check and problem.diffusion and problem.loading.surface_term \
                 and problem.geo.facets_with_role("permeable"):
-            from app.onset.surface import SurfaceCheck
-
             self.surface = SurfaceCheck(problem, settings.rule)
         if settings.policy.branches:
-            from app.onset.branching import BranchSwitcher, typical_cell_size
-
             self.branch = BranchSwitcher(problem, stepper, settings.rule, settings.imperfection,
                                          reference_length or typical_cell_size(problem), log=self.log,
                                          modes=settings.branch_modes)
@@ -297,7 +294,7 @@ class OnsetTracker:
             self.screen.screening = "exact" if self.stepper.minimizing else self.screen.screening
 
 
-class Untracked:
+class NoStabilityTest:
     """``stability.enabled = false``: no test, no history columns, nothing in the summary."""
 
     COLUMNS = ()

@@ -34,6 +34,7 @@ from types import SimpleNamespace
 import numpy as np
 import scipy.linalg as sla
 import ufl
+from dolfinx import fem
 from mpi4py import MPI
 
 from app import compat
@@ -52,12 +53,12 @@ class HalfSpace:
         nodes = -depth * (np.linspace(1.0, 0.0, cells + 1) ** 2)
         d = compat.interval_mesh(MPI.COMM_SELF, nodes)
         self.domain = d
-        self.F = compat.Constant(d, np.eye(dim, dtype=compat.ScalarType))
-        self.s = compat.Constant(d, compat.ScalarType(mat.s0))
+        self.F = fem.Constant(d, np.eye(dim, dtype=compat.ScalarType))
+        self.s = fem.Constant(d, compat.ScalarType(mat.s0))
         law = mat.law
-        self.params = {name: compat.Constant(d, compat.ScalarType(getattr(mat, name))) for name in law.params}
+        self.params = {name: fem.Constant(d, compat.ScalarType(getattr(mat, name))) for name in law.params}
         S = compat.mixed_lagrange_space(d, degree, 2 * dim)
-        p = compat.Function(S)
+        p = fem.Function(S)
         if dim == 2:
             U1, U2, V1, V2 = ufl.split(p)
             parts = (ufl.as_matrix([[U2, U1.dx(0)], [V2, V1.dx(0)]]),
@@ -79,7 +80,7 @@ class HalfSpace:
                 e_s = ufl.diff(e, s)
                 e_ss = ufl.diff(e_s, s)
                 a = a - ufl.derivative(e_s, p, v) * ufl.derivative(e_s, p, dv) / e_ss * dx
-        self.form = compat.form(a)
+        self.form = fem.form(a)
         coords, index, field = [], [], []
         for i in range(2 * dim):
             Vi, dofs = compat.collapse(S.sub(i))

@@ -24,10 +24,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 import ufl
+from dolfinx import fem
 
 from app import compat
 from app.reduced.section import CRITERIA
-
 
 
 def reduced_gradient(shape: str, k, U, V, r):
@@ -54,8 +54,8 @@ class ModeOperator:
         self.criterion, self.shape = criterion, shape
         fields = 4 if criterion == "rate" else 2
         self.S = compat.mixed_lagrange_space(domain, degree, fields)
-        self.k = compat.Constant(domain, compat.ScalarType(0.0))
-        p = compat.Function(self.S)  # the perturbation, evaluated at zero
+        self.k = fem.Constant(domain, compat.ScalarType(0.0))
+        p = fem.Function(self.S)  # the perturbation, evaluated at zero
         parts = ufl.split(p)
         r = ufl.SpatialCoordinate(domain)[0]
         dF = reduced_gradient(shape, self.k, parts[0], parts[1], r)
@@ -80,7 +80,7 @@ class ModeOperator:
                 e_s = ufl.diff(e, s)
                 e_ss = ufl.diff(e_s, s)
                 a = a - ufl.derivative(e_s, p, v) * ufl.derivative(e_s, p, dv) / e_ss * weight * dx
-        self.form = compat.form(a)
+        self.form = fem.form(a)
         self.p = p
         # coordinate order of the dofs (field index breaks ties): K is banded in it
         coords, field_of = np.zeros(0), np.zeros(0, dtype=int)

@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import ufl
+from dolfinx import fem
 from mpi4py import MPI
 
 from app import compat
@@ -42,11 +43,11 @@ class Stability:
     def __init__(self, model: LayeredModel, criterion: str, tau: float | None = None):
         self.model, self.criterion = model, criterion
         m, sec = model, model.section
-        self.base = compat.Function(m.W)
+        self.base = fem.Function(m.W)
         u, q = ufl.split(self.base)
         F0 = m.deformation(u)
         s0 = m.mat.s0 - m.div(q)
-        self.tau = compat.Constant(m.domain, compat.ScalarType(tau or 1.0))
+        self.tau = fem.Constant(m.domain, compat.ScalarType(tau or 1.0))
         held = {1: sec.base} if sec.shape == "planar" and not sec.clamped else {0: sec.base, 1: sec.base}
         if criterion == "rate":
             held[3 if sec.shape == "planar" else 2] = sec.base  # no normal flux through the held end
@@ -54,7 +55,7 @@ class Stability:
                                weight=m.weight, held=held)
         at_surface = (m.r - sec.base) / (sec.surface - sec.base)
         tangent, normal = (0, 1) if sec.shape == "planar" else (1, 0)
-        self._surface = [compat.form(e * at_surface * ufl.ds) for e in (F0[tangent, tangent], F0[normal, normal], s0)]
+        self._surface = [fem.form(e * at_surface * ufl.ds) for e in (F0[tangent, tangent], F0[normal, normal], s0)]
         self.half = HalfSpace(sec.materials[sec.film], criterion, degree=m.res.degree)
 
     def set_state(self, snap: Snapshot) -> None:

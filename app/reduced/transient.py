@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 import ufl
+from dolfinx import fem
 from mpi4py import MPI
 
 from app import compat
@@ -63,17 +64,17 @@ class LayeredModel:
         self.nodes = section.nodes(res.film_cells, res.grading, res.surface_grading)
         self.domain = compat.interval_mesh(comm, self.nodes)
         self.W = compat.mixed_lagrange_space(self.domain, res.degree, 2)
-        self.w = compat.Function(self.W)  # (displacement, dQ of the step)
-        self.state = compat.Function(self.W)  # (displacement, Q accumulated)
+        self.w = fem.Function(self.W)  # (displacement, dQ of the step)
+        self.state = fem.Function(self.W)  # (displacement, Q accumulated)
         self.V0, self.v_dofs = compat.collapse(self.W.sub(0))
         self.V1, self.q_dofs = compat.collapse(self.W.sub(1))
         self.x_v = compat.dof_coordinates(self.V0)
         self.x_q = compat.dof_coordinates(self.V1)
         self.mat = self._fields()
         d = self.domain
-        self.tau = compat.Constant(d, compat.ScalarType(res.dt_first))
-        self.mu_bar = compat.Constant(d, compat.ScalarType(section.loading.mu_bar(0.0)))
-        self.lam_x = compat.Constant(d, compat.ScalarType(1.0))
+        self.tau = fem.Constant(d, compat.ScalarType(res.dt_first))
+        self.mu_bar = fem.Constant(d, compat.ScalarType(section.loading.mu_bar(0.0)))
+        self.lam_x = fem.Constant(d, compat.ScalarType(1.0))
         self.dx = ufl.Measure("dx", domain=d, metadata={"quadrature_degree": 2 * res.degree + 2})
         self.r = ufl.SpatialCoordinate(d)[0]
         self.weight = self.r if section.shape == "axisymmetric" else 1.0
@@ -93,7 +94,7 @@ class LayeredModel:
         mid = compat.dof_coordinates(V0)
         values = {}
         for name in (*law.params, "s0"):
-            f = compat.Function(V0)
+            f = fem.Function(V0)
             for lay in self.section.layers:
                 inside = (mid >= lay.start) & (mid <= lay.end)
                 f.x.array[inside] = getattr(mats[lay.material], name)
@@ -138,9 +139,9 @@ class LayeredModel:
         W = self.W
         self.residual_form = ufl.derivative(energy, self.w, ufl.TestFunction(W))
         self.hessian_form = ufl.derivative(self.residual_form, self.w, ufl.TrialFunction(W))
-        self.residual = compat.form(self.residual_form)
-        self.hessian = compat.form(self.hessian_form)
-        self.energy = compat.form(energy)
+        self.residual = fem.form(self.residual_form)
+        self.hessian = fem.form(self.hessian_form)
+        self.energy = fem.form(energy)
         self.mu = chemical_potential(self.mat, F, s)
 
     def _dof_at(self, dofs, x, where) -> int:

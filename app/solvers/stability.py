@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from dolfinx import fem
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
@@ -176,7 +177,7 @@ def free_to_local(x_free: PETSc.Vec, is_free: PETSc.IS, full: PETSc.Vec, space) 
     sub = full.getSubVector(is_free)
     x_free.copy(sub)
     full.restoreSubVector(is_free, sub)
-    f = compat.Function(space)
+    f = fem.Function(space)
     f.x.array[:compat.owned_size(space)] = full.array
     f.x.scatter_forward()
     return f.x.array.copy()

@@ -74,7 +74,7 @@ class LostStability(StepFailure):
 
 @dataclass
 class StepRecord:
-    """One accepted state: the stepper's own columns, the model's (``values``: the Evolution's
+    """One accepted state: the stepper's own columns, the model's (``values``: the SteppedProblem's
     ``observables`` at that time, :mod:`app.model.history`) and what others add (``extra``: the onset
     tracker's). A model column reads as an attribute too (``rec.growth_mm``)."""
 
@@ -82,7 +82,7 @@ class StepRecord:
     time: float
     dt: float
     newton_its: int
-    inflow: float  # the fluid volume that entered since t = 0 (the Evolution's influx, step by step)
+    inflow: float  # the fluid volume that entered since t = 0 (the SteppedProblem's influx, step by step)
     error_estimate: float = float("nan")
     values: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)
@@ -133,7 +133,7 @@ class Snapshot:
 
 
 @dataclass(frozen=True)
-class Evolution:
+class SteppedProblem:
     """What the stepper advances, as forms, conditions, index sets and the model's hooks (the stepper reads
     nothing else; :func:`app.factory.time_stepper` fills it from a problem)."""
 
@@ -157,7 +157,7 @@ class Evolution:
 
 
 class TimeStepper:
-    """Advances an :class:`Evolution` in time.
+    """Advances an :class:`SteppedProblem` in time.
 
     ``limits``: where a followed branch ends, a callable made once the stepper follows minimizers
     (:meth:`follow_minimizers`) and returning an object with new_step, failed_attempt, out_of_steps and
@@ -166,7 +166,7 @@ class TimeStepper:
     (what, negative eigenvalues) of each stability test it ran (:class:`app.onset.criteria.LossOfStability`);
     None: failures are only cut back."""
 
-    def __init__(self, system: Evolution, time: TimeSettings, solver: SolverSettings, log=None, limits=None,
+    def __init__(self, system: SteppedProblem, time: TimeSettings, solver: SolverSettings, log=None, limits=None,
                  check=None):
         self.system = system
         self.end = time.end
@@ -437,7 +437,7 @@ class TimeStepper:
         """time.stop_at_equilibrium: whether the run has reached its equilibrium with the held loading.
 
         The relative uptake rate r = |dV/dt| t / |V - V(0)| (dV/dt over the last accepted step, V the
-        Evolution's ``uptake`` observable: the fluid volume; t the elapsed time) is below the threshold, after
+        SteppedProblem's ``uptake`` observable: the fluid volume; t the elapsed time) is below the threshold, after
         the last loading kink. For an exponential approach V_inf - V ~ exp(-t/T), the uptake still missing is
         r T/t, less than r of the uptake once t > T. Call it with every record of the run, the initial one
         first."""

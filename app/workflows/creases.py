@@ -34,12 +34,12 @@ SCAN_POINTS = 8  # the coarsest level's load grid over the run
 BISECTIONS = 2  # the bracket is halved this often before regula falsi (its far end may be far past the onset)
 FALSI_STEPS = 6  # at most this many Illinois regula falsi steps after that, until the bracket is within
 TOLERANCE = 2e-4  # this fraction of its load
-FAR = 4.0  # a negative end this many times larger than the positive one is not interpolated towards
-SNAP = 2.0  # a bracket whose negative end's crease is this many times deeper (or failed) ends in a snap
-MARCH = 0.03  # a finer level brackets its onset from the coarser one's in steps of this fraction of it
+FAR_END_RATIO = 4.0  # a negative end this many times larger than the positive one is not interpolated towards
+SNAP_DEPTH_RATIO = 2.0  # a bracket whose negative end's crease is this many times deeper (or failed) ends in a snap
+MARCH_FRACTION = 0.03  # a finer level brackets its onset from the coarser one's in steps of this fraction of it
 LEVEL_RATIO = 2  # crease_resolution halves from one level to the next coarser one
 TIP_RADIUS = 1.5  # the finest elements reach this many crease lengths around the tip
-GROWN = 1.0  # a growing crease deeper than this many fine zones at its onset on the coarsest level ...
+GROWN_ZONES = 1.0  # a growing crease deeper than this many fine zones at its onset on the coarsest level ...
 GROWN_MARGIN = 1.25  # ... has every level meshed again, fine along the symmetry line to this many times its depth
 EQUILIBRIUM = 0.02  # under swelling, a wrinkling onset whose growth is this close to the equilibrium one at its
 # time (relative) was reached quasi-statically: only then do the trial's equilibrium states decide which is first
@@ -111,7 +111,7 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
             levels.append(level)
             break
         grown = level.get("depth_mm", 0.0)
-        if grows and not levels and not depth and grown > GROWN * TIP_RADIUS * c:
+        if grows and not levels and not depth and grown > GROWN_ZONES * TIP_RADIUS * c:
             # the crease has grown out of its fine zone: every level again, fine along the line to past it
             depth = GROWN_MARGIN * grown
             log(f"creases: the crease grew to a depth of {grown:.4g} mm at its onset, beyond the fine zone "
@@ -266,7 +266,7 @@ def _level(trial: CreaseTrial, guess: float | None, end: float, scale: float, lo
                 (a, fa), (b, fb), side, ga, gb = (a2, fa2), (b2, fb2), None, fa2, fb2
             if b - a <= TOLERANCE * b:
                 break
-            if not math.isfinite(gb) or -gb > FAR * ga:  # the far end is far past the onset: halve instead
+            if not math.isfinite(gb) or -gb > FAR_END_RATIO * ga:  # the far end is far past the onset: halve instead
                 t = 0.5 * (a + b)
             else:
                 t = b - gb * (b - a) / (gb - ga)
@@ -316,23 +316,23 @@ def _on_the_grown_branch(difference, bracket, end: float):
 
 def _snapped(trials: list, a: float, b: float, grows: bool) -> bool:
     """Whether the final bracket [a, b] ends in a snap rather than a sign change of one crease's energy: at b
-    the trial failed, or, for a crease held at its size, its crease is SNAP times deeper than at a (the free
+    the trial failed, or, for a crease held at its size, its crease is SNAP_DEPTH_RATIO times deeper than at a (the free
     surface beyond the trial crease has folded onto the line, through it: a larger crease). A growing crease
     (``stability.crease_growth``) is that larger crease, followed down to its own sign change."""
     at = {tr["time"]: tr for tr in trials}
     ta, tb = at[a], at[b]
-    return "failed" in tb or (not grows and tb["depth_mm"] > SNAP * ta["depth_mm"])
+    return "failed" in tb or (not grows and tb["depth_mm"] > SNAP_DEPTH_RATIO * ta["depth_mm"])
 
 
 def _bracket(difference, guess: float | None, end: float):
     """((t, dPi > 0), (t, dPi <= 0)) or None if the difference stays positive to ``end``: a scan of the run
-    (no ``guess``), or a march from ``guess`` in steps of MARCH of it, up or down as its sign says."""
+    (no ``guess``), or a march from ``guess`` in steps of MARCH_FRACTION of it, up or down as its sign says."""
     if guess is None:
         found = _walk(difference, None, 0.0, end / SCAN_POINTS, end)
         if found is not None and found[0] is None:  # negative at the first load: halve it down to a positive one
             return _down_to_positive(difference, found[1], end, found[1][0] / 2, 0.5)
         return found
-    step = MARCH * guess
+    step = MARCH_FRACTION * guess
     f = difference(guess)
     if f <= 0:
         return _down_to_positive(difference, (guess, f), end, step)

@@ -80,11 +80,13 @@ class Cases:
         """The running case's progress: a callable told each accepted step (a ``StepRecord``); a context
         manager that ends its bar. Ranks that do not log get one that does nothing."""
         if not self.show:
-            return Quiet()
+            return NoProgress()
         return Running(label, t_end, self.log, self.bar)
 
 
-class Quiet:
+class NoProgress:
+    """A case's progress where nothing is shown (a rank that does not log, or progress off)."""
+
     def __call__(self, rec) -> None:
         pass
 
@@ -95,7 +97,7 @@ class Quiet:
         pass
 
 
-class Running(Quiet):
+class Running(NoProgress):
     """One case's simulated time ``t`` of ``t_end``: a tqdm bar (``bar``) or a plain line every PLAIN_EVERY s."""
 
     def __init__(self, label: str, t_end: float, log, bar: bool, clock=time.monotonic):
