@@ -51,7 +51,8 @@ from mpi4py import MPI
 
 from app import compat, config, factory
 from app.cli import main
-from app.io import checkpoint
+from app.io import checkpoint, result_identity
+from app.io.dof_layout import KEY_BASE, DofLayout
 from app.onset.tracker import NoStabilityTest
 from app.workflows.run import simulate
 
@@ -123,7 +124,7 @@ def _save_known(path, comm) -> None:
     if comm.rank == 0:
         path.mkdir(parents=True, exist_ok=True)
     comm.barrier()
-    checkpoint.write(path, cfg, checkpoint.DofLayout(p), st, NoStabilityTest(), rows=[{"step": 0}])
+    checkpoint.write(path, cfg, DofLayout(p), st, NoStabilityTest(), rows=[{"step": 0}])
     st.destroy()
 
 
@@ -167,7 +168,7 @@ def _stored_fluxes_by_hand(path) -> None:
         meta = json.loads(z["meta"].tobytes().decode())
         s = meta["snapshots"][meta["current"]]
         uk, x, qk = z["u_key"], z["x"], z["q_key"]
-        lo, hi = x[np.searchsorted(uk, qk // checkpoint.KEY_BASE)], x[np.searchsorted(uk, qk % checkpoint.KEY_BASE)]
+        lo, hi = x[np.searchsorted(uk, qk // KEY_BASE)], x[np.searchsorted(uk, qk % KEY_BASE)]
         t = hi - lo
         normal = np.column_stack([t[:, 1], -t[:, 0]])
         for name, fn in (("state_q", _q), ("dQ_prev", _dq)):
@@ -615,7 +616,7 @@ def test_a_checkpoint_from_before_mesh_refinements_still_resumes(shared_tmp, com
     cfg = swelling_case(*EVERY)
     old = copy.deepcopy(cfg)
     del old["mesh"]["refinements"]
-    assert checkpoint.result_hash(old) == checkpoint.result_hash(cfg)
+    assert result_identity.result_hash(old) == result_identity.result_hash(cfg)
     refined = copy.deepcopy(cfg)
     refined["mesh"]["refinements"] = 1
-    assert checkpoint.first_difference(old, refined) == "mesh.refinements = '<unset>' in the checkpoint, 1 now"
+    assert result_identity.first_difference(old, refined) == "mesh.refinements = '<unset>' in the checkpoint, 1 now"

@@ -21,7 +21,8 @@ stopped (docs/reliability.md, "Checkpoint and restart"):
 Each object writes and reads its own part of the meta: the stepper its counters and each snapshot's
 scalars (``TimeStepper.counters``, ``Snapshot.scalars``; ``resume_from``, ``snapshot_of``), the tracker
 its count, crossings and screen with snapshots referred to by number (``checkpoint_state``,
-``restore_checkpoint``). This module stores the snapshots' arrays, the keys and the file.
+``restore_checkpoint``). This module stores the snapshots' arrays, the keys and the file; the keys are
+:mod:`app.io.dof_layout`'s, what must match for a resume :mod:`app.io.result_identity`'s.
 
 The arrays are stored independently of the mesh partition: displacement dofs keyed by the input node
 index of their vertex, the RTCF flux dofs (one per facet) by their facet's vertex pair. A flux dof's
@@ -43,25 +44,16 @@ from pathlib import Path
 
 import numpy as np
 
-from app import compat, config
-from app.geometry import dofmaps
+from app import config
 from app.io import writes
+from app.io.dof_layout import DofLayout, LayoutMismatch
+from app.io.result_identity import first_difference, input_files, result_hash
 
 FILE = "checkpoint.npz"
 FORMAT = 1
-KEY_BASE = 1 << 31  # a facet's key: lo * KEY_BASE + hi (input node indices < 2^31)
-KEY_BASE_3D = 1 << 21  # in 3D: (a * KEY_BASE_3D + b) * KEY_BASE_3D + c (input node indices < 2^21)
 # the branch's surface profiles (app.model.surface.SurfaceProfiles.arrays) and their members in the file
 PROFILE_MEMBERS = {"growth_mm": "profile_growth", "time": "profile_time", "position": "profile_position",
                    "profile": "profile_value"}
-
-# Keys a resumed run may change: they decide when a run ends or what it writes, never a row before the
-# checkpoint or the continuation after it (time.end: only above the checkpoint's time, see check()); reduced.*
-# only sets the 1D counterpart computed after the run; stability.surface_check adds a summary entry only, and
-# the trial crease (stability.creases and its parameters) is computed after the run on a mesh of its own.
-FREE_KEYS = ("output", "time.end", "time.max_steps", "stability.error_estimate", "stability.surface_check", "reduced",
-             "stability.creases", "stability.crease_size", "stability.crease_resolution",
-             "stability.crease_fluid", "stability.crease_growth")
 
 
 class CheckpointError(config.ConfigError):
@@ -69,198 +61,6 @@ class CheckpointError(config.ConfigError):
 
     def __init__(self, message: str):
         super().__init__("", message)
-
-
-# --- the config's result-changing keys ----------------------------------------------------------
-
-
-def _flat(d: dict, prefix: str = "") -> dict:
-    out = {}
-    for k, v in d.items():
-        key = f"{prefix}{k}"
-        if isinstance(v, dict) and v:
-            out.update(_flat(v, key + "."))
-        else:
-            out[key] = v
-    return out
-
-
-def _free(key: str) -> bool:
-    return any(key == f or key.startswith(f + ".") for f in FREE_KEYS)
-
-
-# keys added after checkpoints were first written, with the value that means what their absence meant: left
-# out of the comparison at that value, so such a checkpoint still resumes
-ADDED_KEYS = {"mesh.refinements": 0}
-
-
-def result_keys(cfg: dict) -> dict:
-    """The flattened config without :data:`FREE_KEYS` (and :data:`ADDED_KEYS` at their old meaning): what
-    must be equal for a resume."""
-    return {k: v for k, v in _flat(cfg).items() if not _free(k) and not (k in ADDED_KEYS and v == ADDED_KEYS[k])}
-
-
-def result_hash(cfg: dict) -> str:
-    text = json.dumps(result_keys(cfg), sort_keys=True, default=repr)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def input_files(cfg: dict) -> dict:
-    """sha256 of each input file the config names (a user mesh, ``geometry.file``): a file edited in place
-    changes the result under an unchanged config."""
-    out = {}
-    path = cfg["geometry"].get("file")
-    if path:
-        try:
-            out["geometry.file"] = hashlib.sha256(Path(path).read_bytes()).hexdigest()
-        except OSError:
-            out["geometry.file"] = None
-    return out
-
-
-def first_difference(old: dict, new: dict) -> str | None:
-    """'key = old in the checkpoint, new now' for the first result-changing key (in the config's order)
-    whose value differs, or None."""
-    a, b = result_keys(old), result_keys(new)
-    unset = "<unset>"
-    for key in list(b) + [k for k in a if k not in b]:
-        if a.get(key, unset) != b.get(key, unset):
-            return f"{key} = {a.get(key, unset)!r} in the checkpoint, {b.get(key, unset)!r} now"
-    return None
-
-
-# --- mesh-independent dof keys ---------------------------------------------------------------------
-
-
-class DofLayout:
-    """The keys of a problem's local dofs (owned + ghost) and the moves between its local arrays and the
-    stored, key-ordered ones (gathered to rank 0, scattered back)."""
-
-    def __init__(self, problem):
-        self.comm = problem.comm
-        error = None
-        try:
-            self._build(problem)
-        except RuntimeError as err:  # raised on every rank, so none waits in a collective
-            error = str(err)
-        errors = [e for e in self.comm.allgather(error) if e]
-        if errors:
-            raise RuntimeError(f"checkpoint layout: {errors[0]}")
-
-    def _build(self, problem):
-        p = problem
-        orig = compat.original_node_indices(p.domain)
-        self.dim = p.domain.geometry.dim
-        limit = KEY_BASE if self.dim == 2 else KEY_BASE_3D
-        if orig.size and orig.max() >= limit:
-            raise RuntimeError(f"input node index {orig.max()} >= {limit}: facet keys would overflow")
-        X = compat.node_coordinates(p.domain)
-        nodes = dofmaps.lagrange1_dof_nodes(p.V_u)  # per local displacement block
-        self.u_key, self.u_x = orig[nodes], X[nodes]
-        ends = dofmaps.facet_nodes(p.domain)[dofmaps.facet_of_dofs(p.V_q)]  # (n_q, 2 or 4) geometry nodes
-        ends = np.take_along_axis(ends, np.argsort(orig[ends], axis=1), axis=1)  # by input index
-        if self.dim == 2:
-            lo, hi = ends[:, 0], ends[:, 1]
-            self.q_key = orig[lo] * KEY_BASE + orig[hi]
-            t = X[hi] - X[lo]
-            canonical = np.column_stack([t[:, 1], -t[:, 0]])
-        else:
-            a, b, c = ends[:, 0], ends[:, 1], ends[:, 2]
-            self.q_key = (orig[a] * KEY_BASE_3D + orig[b]) * KEY_BASE_3D + orig[c]
-            canonical = np.cross(X[b] - X[a], X[c] - X[a])
-        n_dof = dofmaps.facet_dof_normals(p.V_q)
-        dot = np.einsum("ij,ij->i", n_dof, canonical)
-        if (np.abs(dot) < 0.5 * np.linalg.norm(n_dof, axis=1) * np.linalg.norm(canonical, axis=1)).any():
-            raise RuntimeError("a flux dof's normal is not along its facet's normal")
-        self.q_sign = np.sign(dot)
-        self.nu = p.V_u.dofmap.index_map.size_local  # owned displacement blocks (the first ones)
-        self.nq = p.V_q.dofmap.index_map.size_local
-        self.u_dofs, self.q_dofs = p.u_dofs, p.q_dofs
-        self.n_w = p.state.x.array.size
-        self._order = None  # rank 0: the permutation of the gathered owned dofs into key order
-        self._keys = None  # rank 0: (u_key, x, q_key) in key order, once gathered
-        self._gathered = False
-        self._where = None  # rank 0: per rank, the stored positions of its local dofs
-
-    # local arrays -> owned canonical parts
-    def u_part(self, u_unrolled: np.ndarray) -> np.ndarray:
-        return np.asarray(u_unrolled).reshape(-1, self.dim)[: self.nu]
-
-    def q_part(self, q: np.ndarray) -> np.ndarray:
-        return (np.asarray(q) * self.q_sign)[: self.nq]
-
-    def mixed_parts(self, w: np.ndarray):
-        return self.u_part(w[self.u_dofs]), self.q_part(w[self.q_dofs])
-
-    def mixed(self, u: np.ndarray, q_canonical: np.ndarray) -> np.ndarray:
-        """A local mixed-space array from local (owned + ghost) displacement blocks and canonical fluxes."""
-        w = np.zeros(self.n_w)
-        w[self.u_dofs] = u.ravel()
-        w[self.q_dofs] = q_canonical * self.q_sign
-        return w
-
-    # gathering (writing)
-    def keys(self):
-        """Collective (the first time): on rank 0 (u_key, x, q_key) in key order, else None."""
-        if not self._gathered:
-            self._keys = self._gather_keys()
-            self._gathered = True
-        return self._keys
-
-    def _gather_keys(self):
-        parts = self.comm.gather((self.u_key[: self.nu], self.u_x[: self.nu], self.q_key[: self.nq]), root=0)
-        keys, error = None, None
-        if self.comm.rank == 0:
-            uk = np.concatenate([p[0] for p in parts])
-            qk = np.concatenate([p[2] for p in parts])
-            ou, oq = np.argsort(uk, kind="stable"), np.argsort(qk, kind="stable")
-            for k, o, what in ((uk, ou, "node"), (qk, oq, "facet")):
-                if k.size > 1 and not (np.diff(k[o]) > 0).all():
-                    error = f"checkpoint layout: two owned dofs with one {what} key"
-            self._order = {"u": ou, "q": oq}
-            keys = uk[ou], np.concatenate([p[1] for p in parts])[ou], qk[oq]
-        error = self.comm.bcast(error, root=0)
-        if error:
-            raise RuntimeError(error)
-        return keys
-
-    def gather(self, kind: str, owned: np.ndarray):
-        """Collective: the owned values of every rank in key order on rank 0 (``keys()`` first), else None."""
-        parts = self.comm.gather(np.ascontiguousarray(owned), root=0)
-        if self.comm.rank != 0:
-            return None
-        return np.concatenate(parts)[self._order[kind]]
-
-    # scattering (restoring)
-    def locate(self, stored) -> None:
-        """Collective: match every rank's local dofs with the stored keys ((u_key, x, q_key) on rank 0);
-        a :class:`CheckpointError` on every rank if the meshes differ."""
-        parts = self.comm.gather((self.u_key, self.u_x, self.q_key), root=0)
-        problem = None
-        if self.comm.rank == 0:
-            uk, x, qk = stored
-            scale = max(1.0, float(np.abs(x).max(initial=0.0)))
-            self._where = []
-            for r, (ku, xu, kq) in enumerate(parts):
-                pu = np.minimum(np.searchsorted(uk, ku), max(uk.size - 1, 0))
-                pq = np.minimum(np.searchsorted(qk, kq), max(qk.size - 1, 0))
-                if uk.size == 0 or (uk[pu] != ku).any() or qk.size == 0 or (qk[pq] != kq).any():
-                    problem = "its mesh has nodes or facets the rebuilt mesh lacks"
-                    break
-                dx = float(np.abs(x[pu] - xu).max(initial=0.0))
-                if dx > 1e-9 * scale:
-                    problem = f"a node of the rebuilt mesh is {dx:.3g} mm away from the checkpoint's"
-                    break
-                self._where.append({"u": pu, "q": pq})
-        problem = self.comm.bcast(problem, root=0)
-        if problem:
-            raise CheckpointError(f"the checkpoint does not fit the mesh this config builds: {problem} "
-                                  "(a changed mesh file or gmsh version?)")
-
-    def scatter(self, kind: str, stored) -> np.ndarray:
-        """Collective: this rank's local values of a stored array (given on rank 0)."""
-        chunks = [stored[w[kind]] for w in self._where] if self.comm.rank == 0 else None
-        return self.comm.scatter(chunks, root=0)
 
 
 # --- writing ---------------------------------------------------------------------------------------
@@ -366,8 +166,6 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, pr
     if error:
         raise OSError(f"checkpoint not written: {error}")
     return size
-
-
 
 
 def remove(outdir, comm) -> None:
@@ -487,7 +285,10 @@ def restore(resume: Resume, problem, stepper, tracker) -> DofLayout:
     comm, meta = layout.comm, resume.meta
     z = np.load(resume.path, allow_pickle=False) if comm.rank == 0 else None
     try:
-        layout.locate((z["u_key"], z["x"], z["q_key"]) if z is not None else None)
+        try:
+            layout.locate((z["u_key"], z["x"], z["q_key"]) if z is not None else None)
+        except LayoutMismatch as err:  # on every rank alike
+            raise CheckpointError(str(err)) from None
         n_total = comm.allreduce(layout.nu), comm.allreduce(layout.nq)
         if z is not None and n_total != (z["u_key"].size, z["q_key"].size):
             problem_text = f"{n_total} (nodes, facets) now, {(z['u_key'].size, z['q_key'].size)} in the checkpoint"
