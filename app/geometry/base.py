@@ -71,7 +71,7 @@ class GeometrySetup:
     tm: object  # app.geometry.tagged.TaggedMesh
     layers: dict[str, str]  # cell group -> material name
     boundaries: dict[str, str]  # facet group -> role
-    growth: str = "mean_normal"  # a growth measure of app.model.surface.GROWTH: mean_normal, mean_radial, vertex
+    growth: str = "mean_normal"  # a growth measure of app.model.growth.GROWTH: mean_normal, mean_radial, vertex
     growth_point: tuple[float, float] | None = None
     growth_direction: tuple[float, float] | None = None  # inward unit vector at growth_point
     wrinkles: str = "along"  # a surface shape of app.model.surface.SHAPES: along (open), around (closed)

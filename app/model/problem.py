@@ -18,11 +18,12 @@ from dolfinx import fem
 from app import compat
 from app.geometry import GeometrySetup
 from app.model.contact import SurfaceContact
+from app.model.growth import GROWTH
 from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.loading import BoundaryConditions, Loading
 from app.model.material import Material
 from app.model.potential import CompiledForms, build, fields_class
-from app.model.surface import GROWTH, surface_shape
+from app.model.surface import surface_shape
 
 
 @dataclass(frozen=True)
@@ -183,7 +184,7 @@ class Problem:
 
     def growth(self) -> float:
         """The growth [mm] of the converged state, as the geometry kind measures it
-        (:class:`app.model.surface.GrowthMeasure`: the paper's mean normal displacement of the permeable
+        (:class:`app.model.growth.GrowthMeasure`: the paper's mean normal displacement of the permeable
         surface; a tube's mean inward radial displacement; one vertex's inward displacement)."""
         return self._growth()
 
