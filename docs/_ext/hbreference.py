@@ -43,7 +43,7 @@ def config_page() -> str:
 
     kinds = config.kind_defaults()
     lines = ["# Configuration keys", "",
-             "Generated from the config schema (`app/config.py` and the keys each geometry kind, material law,",
+             "Generated from the config schema (`app/config_schema.py` and the keys each geometry kind, material law,",
              "loading and stability criterion declares). Every key is optional; `--set KEY=VALUE` (CLI) or",
              "`load_config(path, {KEY: VALUE})` (Python) overrides any of them. A value outside its range stops",
              "with one line naming the key and the allowed range (exit code 2). How the keys work together:",
