@@ -97,10 +97,10 @@ def problem(cfg: dict, comm, setup: geometry.GeometrySetup | None = None) -> Pro
 
 def stepped_problem(p: Problem) -> SteppedProblem:
     """What the time stepper advances of a problem: its forms, conditions, index sets and hooks."""
-    return SteppedProblem(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w, p.state, p.u_dofs, p.q_dofs,
-                     p.comm, cell_content_change(p), tuple(p.loading.kinks()), p.diffusion, p.set_time,
-                     p.step_influx, partial(history.record, p), getattr(p, "contact", None),
-                     uptake="fluid_volume")
+    return SteppedProblem(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w, p.state, p.u_dofs,
+                          p.q_dofs, p.comm, cell_content_change(p), tuple(p.loading.kinks()), p.diffusion,
+                          p.set_time, p.step_influx, partial(history.record, p), getattr(p, "contact", None),
+                          uptake="fluid_volume")
 
 
 def time_stepper(p: Problem, time: TimeSettings, solver: SolverSettings, log=None, limits: bool = True,

@@ -27,10 +27,9 @@ class Tube(GeometryKind):
     def cross_section(self, geo: dict) -> CrossSection:
         """r from the passage (r = R - H - w, the film's permeable surface) to the rigid wall at R; a 3D tube's
         modes with this section are its axially uniform ones."""
-        R = geo["outer_radius"]
-        a = R - geo["substrate_thickness"] - geo["film_thickness"]
-        return CrossSection("axisymmetric", (("film", a, a + geo["film_thickness"]), ("substrate",
-                                             a + geo["film_thickness"], R)), a, R, axial=self.three_d)
+        R, w = geo["outer_radius"], geo["film_thickness"]
+        a = R - geo["substrate_thickness"] - w
+        return CrossSection("axisymmetric", (("film", a, a + w), ("substrate", a + w, R)), a, R, axial=self.three_d)
 
     def aspect_ratio(self, geo: dict) -> float:
         return 1.0

@@ -76,10 +76,6 @@ def fields_for(dim: int) -> list[Field]:
     return [f for f in FIELDS if f.applies(dim)]
 
 
-def names(dim: int) -> tuple[str, ...]:
-    return tuple(f.name for f in fields_for(dim))
-
-
 def smallest_principal(sigma):
     """The smallest eigenvalue of a symmetric 3 x 3 UFL tensor (the trigonometric closed form; an isotropic
     tensor, where the deviator vanishes, gives its mean stress)."""
