@@ -1,4 +1,5 @@
-"""The energetic crease onset (stability.creases; app/onset/creases.py, app/workflows/creases.py, docs/creases.md).
+"""The energetic crease onset (stability.creases; app/onset/creases.py, app/onset/maxwell.py, app/workflows/creases.py,
+docs/creases.md).
 
 - A homogeneous layer in plane-strain compression with the fluid frozen: the crease onset at the nominal
   strain of Hong, Zhao & Suo (2009), 0.354, within 3%, and before the same layer's linear (Biot) onset;
@@ -20,6 +21,7 @@ from conftest import long_physics
 
 from app import config, factory, geometry
 from app.onset.creases import CreaseFailed, CreaseTrial, FlatFailed
+from app.onset import maxwell
 from app.workflows import creases as workflow
 from app.workflows.pipeline import run_case
 
@@ -60,7 +62,7 @@ def _coarsest_level(cfg, comm, size: float, grows: bool) -> dict:
     trial, c = _trial(cfg, comm, size, 4, grows=grows)
     try:
         mu = trial.problem.materials["film"].shear_modulus
-        return workflow._level(trial, None, 1.0, mu * c * c, lambda msg: None)
+        return maxwell.level_onset(trial, None, 1.0, mu * c * c, lambda msg: None)
     finally:
         trial.destroy()
 
@@ -226,15 +228,15 @@ def test_a_bracket_that_ends_in_a_snap_bounds_the_onset_from_above():
     trial at the negative end is."""
     snapped = [{"time": 0.621582, "difference": 1.26e-5, "depth_mm": 0.02924},
                {"time": 0.62207, "difference": -1.98e-3, "depth_mm": 0.2863}]
-    assert workflow._snapped(snapped, 0.621582, 0.62207, grows=False)
+    assert maxwell._snapped(snapped, 0.621582, 0.62207, grows=False)
     genuine = [{"time": 9735.71, "difference": 2.9e-4, "depth_mm": 0.1627},
                {"time": 9736.33, "difference": -2.1e-4, "depth_mm": 0.1664}]
-    assert not workflow._snapped(genuine, 9735.71, 9736.33, grows=False)
+    assert not maxwell._snapped(genuine, 9735.71, 9736.33, grows=False)
     failed = [genuine[0], {"time": 9736.33, "failed": "did not close"}]
-    assert workflow._snapped(failed, 9735.71, 9736.33, grows=False)
+    assert maxwell._snapped(failed, 9735.71, 9736.33, grows=False)
     # a growing crease is that deeper fold, followed down to its own sign change: no bound, unless it failed
-    assert not workflow._snapped(snapped, 0.621582, 0.62207, grows=True)
-    assert workflow._snapped(failed, 9735.71, 9736.33, grows=True)
+    assert not maxwell._snapped(snapped, 0.621582, 0.62207, grows=True)
+    assert maxwell._snapped(failed, 9735.71, 9736.33, grows=True)
     # the onset is then the finest level's snap load, an upper bound: a crease before a wrinkle stays
     # "crease", one after it decides nothing; the log line says "at most"
     bound = workflow._extrapolated([0.64, 0.625, 0.6216], snap=True)
@@ -263,7 +265,7 @@ def test_a_flat_state_that_cannot_be_solved_ends_the_level_instead_of_counting_a
 
     fake = SimpleNamespace(trial=trial, system=SimpleNamespace(fluid="frozen"))
     with pytest.raises(FlatFailed, match="flat state did not converge"):
-        workflow._level(fake, None, 1.0, 1.0, lambda msg: None)
+        maxwell.level_onset(fake, None, 1.0, 1.0, lambda msg: None)
     assert calls == [0.125]  # the first load of the scan, not a march downwards from it
 
 
@@ -287,19 +289,19 @@ def test_a_scan_whose_flat_state_ends_is_narrowed_to_where_it_was_solved():
         return SimpleNamespace(trial=trial, grows=False, system=SimpleNamespace(fluid="frozen"),
                                problem=SimpleNamespace(loading=loading))
 
-    level = workflow._level(fake(0.52, 0.53), None, 1.0, 1.0, lambda msg: None)
-    assert level["time"] == pytest.approx(0.52, rel=workflow.TOLERANCE)
+    level = maxwell.level_onset(fake(0.52, 0.53), None, 1.0, 1.0, lambda msg: None)
+    assert level["time"] == pytest.approx(0.52, rel=maxwell.TOLERANCE)
     assert all(tr["time"] <= 0.53 for tr in level["trials"])
     with pytest.raises(FlatFailed):
-        workflow._level(fake(0.58, 0.55), None, 1.0, 1.0, lambda msg: None)
+        maxwell.level_onset(fake(0.58, 0.55), None, 1.0, 1.0, lambda msg: None)
     # a finer level marching from the coarser onset (steps of 3% of it) narrows its march the same way
-    level = workflow._level(fake(0.52, 0.53), 0.515, 1.0, 1.0, lambda msg: None)
-    assert level["time"] == pytest.approx(0.52, rel=workflow.TOLERANCE)
+    level = maxwell.level_onset(fake(0.52, 0.53), 0.515, 1.0, 1.0, lambda msg: None)
+    assert level["time"] == pytest.approx(0.52, rel=maxwell.TOLERANCE)
     with pytest.raises(FlatFailed):
-        workflow._level(fake(0.58, 0.55), 0.515, 1.0, 1.0, lambda msg: None)
+        maxwell.level_onset(fake(0.58, 0.55), 0.515, 1.0, 1.0, lambda msg: None)
     # an onset below the scan's first load, or below a finer level's starting guess: walked down to it
     for root, guess in ((0.03, None), (0.52, 0.6)):
-        level = workflow._level(fake(root, 2.0), guess, 1.0, 1.0, lambda msg: None)
-        assert level["time"] == pytest.approx(root, rel=workflow.TOLERANCE)
-    with pytest.raises(workflow.CreaseFailed):  # negative down to end / 1000: no onset to bracket
-        workflow._level(fake(1e-4, 2.0), None, 1.0, 1.0, lambda msg: None)
+        level = maxwell.level_onset(fake(root, 2.0), guess, 1.0, 1.0, lambda msg: None)
+        assert level["time"] == pytest.approx(root, rel=maxwell.TOLERANCE)
+    with pytest.raises(maxwell.CreaseFailed):  # negative down to end / 1000: no onset to bracket
+        maxwell.level_onset(fake(1e-4, 2.0), None, 1.0, 1.0, lambda msg: None)
