@@ -1,4 +1,5 @@
-"""Self-contact of the traction-free surface (stability.contact; app/model/contact.py, docs/creases.md).
+"""Self-contact of the traction-free surface (stability.contact; app/model/penalty.py,
+app/model/polyline_penalty.py, docs/creases.md).
 
 - The penalty's gradient and Hessian against central finite differences of its energy.
 - The exact check: a gel block with a slit down its symmetry line, swelling between two rollers, presses the
@@ -20,7 +21,7 @@ from conftest import long_physics, run_to_end
 from mpi4py import MPI
 
 from app import compat, config
-from app.model.contact import GAP_LIMIT, SelfContact, _gap_derivatives, crossing_segments
+from app.model.polyline_penalty import GAP_LIMIT, PolylinePenalty, _gap_derivatives, crossing_segments
 
 
 def test_the_gap_and_the_penalty_have_their_finite_difference_derivatives():
@@ -41,7 +42,7 @@ def test_the_gap_and_the_penalty_have_their_finite_difference_derivatives():
     X[:3, 0] = -0.001
     X[4:, 0] = 0.001
     segs = np.array([[i + 1, i] for i in range(len(X) - 1)])  # the body lies below/inside: right normal out
-    pen = SelfContact(X, segs, stiffness=50.0)
+    pen = PolylinePenalty(X, segs, stiffness=50.0)
     u = np.zeros_like(X)
     u[:3, 0], u[4:, 0] = 0.0015, -0.0015
     u += rng.normal(scale=1e-4, size=u.shape)
@@ -56,7 +57,7 @@ def test_the_gap_and_the_penalty_have_their_finite_difference_derivatives():
     assert pen.energy(np.zeros_like(X)) == 0.0
 
 
-def _central_differences(pen: SelfContact, u: np.ndarray, eps: float):
+def _central_differences(pen: PolylinePenalty, u: np.ndarray, eps: float):
     """The penalty's gradient (from its energy) and Hessian (from its gradient) by central differences of step
     ``eps`` in every displacement component of ``u``."""
     flat = u.reshape(-1)
@@ -84,7 +85,7 @@ def test_a_node_over_a_joint_pairs_by_the_geometry_not_the_numbering():
     u = np.zeros_like(X)
     u[4] = [0.0, -0.51]  # node 4 through the joint at node 1 by 0.01
     for order in ([0, 1, 2], [2, 1, 0], [1, 2, 0]):
-        c = SelfContact(X, face[order], 1.0)
+        c = PolylinePenalty(X, face[order], 1.0)
         state = c.pairs(u)
         assert list(state.points) == [4]
         assert tuple(c.segments[state.segments[0]]) == (1, 0)
@@ -120,7 +121,7 @@ def test_a_point_pushed_behind_a_bent_face_has_the_energy_of_its_distance_to_it(
     joints: sliding past a concave joint, or out of a widened range, its energy jumped (the line search's
     failures in folds at a stable state: docs/creases.md)."""
     X, segments = _bent_face()
-    pen = SelfContact(X, segments, stiffness=2.0)
+    pen = PolylinePenalty(X, segments, stiffness=2.0)
     rng = np.random.default_rng(3)
     u = np.zeros_like(X)
     checked = 0
@@ -150,7 +151,7 @@ def test_a_point_behind_a_concave_joint_has_the_finite_difference_derivatives():
     its gradient and Hessian against central differences."""
     X, segments = _bent_face()
     X[6] = [2.02, 1.0]  # a probe of three distinct points
-    pen = SelfContact(X, segments, stiffness=3.0)
+    pen = PolylinePenalty(X, segments, stiffness=3.0)
     u = np.zeros_like(X)
     u[5:7] = np.array([2.99, -0.35]) - X[5]  # below the concave joint at node 3, about 0.05 behind it
     state = pen.pairs(u)
@@ -171,7 +172,7 @@ def test_the_pairs_near_enough_to_touch_are_those_of_a_check_of_every_pair():
     n = 320
     xs = np.linspace(0.0, 2.0, n)
     X = np.stack([xs, np.zeros(n)], axis=1)
-    pen = SelfContact(X, np.array([[i + 1, i] for i in range(n - 1)]), stiffness=1.0)
+    pen = PolylinePenalty(X, np.array([[i + 1, i] for i in range(n - 1)]), stiffness=1.0)
     seen = paired = 0
     for _ in range(50):
         amp, k = rng.uniform(0.01, 0.08), rng.integers(5, 20)
@@ -204,7 +205,7 @@ def test_the_pairs_near_enough_to_touch_are_those_of_a_check_of_every_pair():
     assert seen > 800 and paired > 800  # pairs checked (measured 976 and 952, 54 of them behind a joint)
     # the farthest a pair can lie from its segment's midpoint: at the segment's end, at the reach
     face = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [0.0, 1.0], [1e-9, 1.0]])
-    far = SelfContact(face, np.array([[1, 0], [2, 1], [3, 4]]), stiffness=1.0)  # normals +y; a probe (3, 4)
+    far = PolylinePenalty(face, np.array([[1, 0], [2, 1], [3, 4]]), stiffness=1.0)  # normals +y; a probe (3, 4)
     for s_end in (1e-12, 1.0 - 2e-9):
         u = np.zeros_like(face)
         u[3:5] = np.array([1.0 - s_end, -0.499]) - face[3]  # over segment (1, 0), 0.499 of its length behind it
@@ -251,7 +252,7 @@ def test_a_node_pushed_through_beyond_the_penalty_reach_is_outside_the_domain():
     upper = np.stack([np.linspace(0.0, 1.0, n), np.full(n, 0.1)], axis=1)  # right normals down
     X = np.vstack([lower, upper])
     segs = np.array([(i, i + 1) for i in range(n - 1)] + [(n + i, n + i + 1) for i in range(n - 1)])
-    pen = SelfContact(X, segs, stiffness=1000.0)
+    pen = PolylinePenalty(X, segs, stiffness=1000.0)
     energies, objectives = [], []
     for depth in np.linspace(0.0, 0.3, 61):
         u = np.zeros_like(X)
@@ -623,13 +624,13 @@ def test_the_deepest_contact_of_a_symmetric_crease_does_not_flip_with_roundoff()
     """A crease's two faces penetrate each other equally by symmetry: the history's contact place is the first
     in x of the equally deep (to 1e-6) contacts, whichever roundoff makes deeper (a 2-rank resumed run once
     reported x = 0.11 where the uninterrupted one had 0.09); a deeper contact elsewhere still wins."""
-    from app.model.contact import _deepest
+    from app.model.polyline_penalty import deepest
 
     X = np.array([[0.09, 0.5], [0.11, 0.5], [0.3, 0.5]])
     nodes = np.array([0, 1, 2])
     for eps in (1e-13, -1e-13):
-        assert _deepest(nodes, np.array([-2e-6, -2e-6 * (1 + eps), -1e-7]), X) == 0
-    assert _deepest(nodes, np.array([-2e-6, -2e-6, -3e-6]), X) == 2
+        assert deepest(nodes, np.array([-2e-6, -2e-6 * (1 + eps), -1e-7]), X) == 0
+    assert deepest(nodes, np.array([-2e-6, -2e-6, -3e-6]), X) == 2
 
 
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: on 2 ranks this soft penalty's snap into the crease is "

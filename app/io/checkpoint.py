@@ -106,7 +106,7 @@ def write(outdir, cfg: dict, layout: DofLayout, stepper, tracker, rows: list, pr
     """Write the checkpoint of the run's current state (collective; between steps). Returns its size in
     bytes on rank 0 (0 elsewhere); an OSError on every rank if rank 0 could not write it (the previous
     checkpoint is then left as it was). ``profiles``: the branch's :class:`SurfaceProfiles` so far;
-    ``contact``: the problem's :class:`~app.model.contact.SurfaceContact` (its penalty, raised on the way)."""
+    ``contact``: the problem's :class:`~app.model.penalty.PenaltyContact` (its penalty, raised on the way)."""
     comm = layout.comm
     rank0 = comm.rank == 0
     final = Path(outdir) / FILE

@@ -20,7 +20,7 @@ contact pressure of mu, 0.99 d_hat), a fraction of an element that vanishes with
 Two Hessians: the stability criteria and the minimizer's final plain-Newton polish take the exact one
 (:meth:`BarrierContact.entry_blocks`, whose inertia the criteria read); Newton's matrix otherwise takes each
 pair's Hessian projected to positive semi-definite (:meth:`BarrierContact.newton_blocks`).
-What the fluid does in contact: nothing changes, as with the penalty (:mod:`app.model.contact`).
+What the fluid does in contact: nothing changes, as with the penalty (:mod:`app.model.penalty`).
 """
 
 from __future__ import annotations
@@ -201,7 +201,7 @@ class Barrier:
 
 class BarrierContact(GatheredSurface):
     """The barrier self-contact of a :class:`~app.model.problem.Problem`'s traction-free surface, 2D or 3D,
-    with the interface of :class:`app.model.contact.SurfaceContact` (the solvers' ``extra`` term) and the
+    with the interface of :class:`app.model.penalty.PenaltyContact` (the solvers' ``extra`` term) and the
     minimizer's step filter (:meth:`step_fraction`)."""
 
     name = "barrier"

@@ -1,5 +1,5 @@
 """The surface that can touch itself, gathered on every rank: what both contact energies share (the penalty,
-:mod:`app.model.contact`, and the barrier, :mod:`app.model.barrier`), in 2D and 3D.
+:mod:`app.model.penalty`, and the barrier, :mod:`app.model.barrier`), in 2D and 3D.
 
 Every boundary facet whose role holds no displacement component (permeable, impermeable, free) is part of it:
 a segment between two P1 nodes in 2D, a quadrilateral of four Q1 nodes in 3D. The facets of every rank are

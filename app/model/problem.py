@@ -17,7 +17,7 @@ from dolfinx import fem
 
 from app import compat
 from app.geometry import GeometrySetup
-from app.model.contact import SurfaceContact
+from app.model.penalty import PenaltyContact
 from app.model.growth import GROWTH
 from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.loading import BoundaryConditions, Loading
@@ -75,7 +75,7 @@ class Problem:
                          self.dx_coupling)
         self.forms = CompiledForms(self.pot)
         self.bcs, self._driven = self._boundary_conditions(loading.conditions(self.geo.boundaries))
-        self.contact = None  # the surface's self-contact term (app.model.contact.SurfaceContact), if on
+        self.contact = None  # the surface's self-contact term (app.model.penalty.PenaltyContact), if on
         self._observables()
 
     def enable_contact(self, kappa: float, energy: str = "penalty") -> None:
@@ -86,7 +86,7 @@ class Problem:
 
             self.contact = BarrierContact(self, kappa)
         else:
-            self.contact = SurfaceContact(self, kappa)
+            self.contact = PenaltyContact(self, kappa)
 
     # --- setup helpers ---------------------------------------------------------------------
 

@@ -2,7 +2,7 @@
 
 Without self-contact (``stability.contact = false``, the default) the potential has no contact energy: once
 wrinkles fold into a crease, the permeable surface passes through itself and the states that follow mean
-nothing. With it (a penalty, :mod:`app.model.contact`, or a barrier, :mod:`app.model.barrier`) the surface
+nothing. With it (a penalty, :mod:`app.model.penalty`, or a barrier, :mod:`app.model.barrier`) the surface
 holds, and a penalty that cannot hold a state is an overrun. In either case a cell with det F <= 0 cannot be
 represented (the energy's ln J is undefined there). A run that follows the branch checks every accepted
 state and ends with status "contact" (a crossing, or the penalty overrun) or "inverted", saying when and where, instead of a Newton
@@ -19,7 +19,7 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from app import compat
-from app.model.contact import GAP_LIMIT, crossing_segments
+from app.model.polyline_penalty import GAP_LIMIT, crossing_segments
 from app.model.kinematics import deformation_gradient
 from app.model.surface import boundary_displacement, shape_of
 from app.solvers.stepping import ModelLimit
@@ -49,7 +49,7 @@ LOCKED = 0.5
 
 def _segments_cross(p: np.ndarray, closed: bool) -> tuple[int, int] | None:
     """The first pair (i, j) of non-adjacent segments of the polyline p (N, 2) that intersect or touch, else
-    None (:func:`app.model.contact.crossing_segments` on the polyline's segments)."""
+    None (:func:`app.model.polyline_penalty.crossing_segments` on the polyline's segments)."""
     n = len(p) if closed else len(p) - 1
     if n < 4:
         return None
@@ -135,7 +135,7 @@ def contact_summary(problem, rows: list[dict]) -> dict:
 def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
     """With self-contact on: a state whose surface crosses itself where a node was pushed through beyond the
     pairing's reach (the same rule as the minimizer's objective,
-    :meth:`app.model.contact.SurfaceContact.objective`), or penetrates deeper than GAP_LIMIT of its
+    :meth:`app.model.penalty.PenaltyContact.objective`), or penetrates deeper than GAP_LIMIT of its
     element."""
     c = problem.contact
     if c.name == "barrier":  # no penetration to overrun; only a crossing the step filter missed
@@ -219,7 +219,7 @@ class ModelLimits:
         iterate but reaches only ``REACH`` segment lengths through the surface, and a node that one iterate
         carries farther is missed. With ``retry`` (a shorter step is left) that limit is returned and the
         stepper cuts the step back; without, it ends the run. A state that penetrates deeper than GAP_LIMIT of
-        its element raises the penalty (:meth:`app.model.contact.SurfaceContact.stiffen`) and is returned with
+        its element raises the penalty (:meth:`app.model.penalty.PenaltyContact.stiffen`) and is returned with
         ``stiffened``: the stepper solves the same step again; past KAPPA_MAX it ends the run."""
         limit = self._of(array)
         if limit is None:

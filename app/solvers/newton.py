@@ -89,7 +89,7 @@ class NewtonSolver:
     solver's field-split preconditioner; the direct solver does not need them.
 
     ``extra`` is a term of the energy that is not a form (the surface's self-contact,
-    :class:`app.model.contact.SurfaceContact`): ``extra.terms(owned_values)`` gives its energy and gradient
+    :class:`app.model.penalty.PenaltyContact`): ``extra.terms(owned_values)`` gives its energy and gradient
     in global dof numbers, ``extra.entry_blocks(owned_values)`` its Hessian as blocks on its entries,
     ``extra.global_entries`` their global dofs, ``extra.energy(owned_values)`` its energy and
     ``extra.objective(owned_values)`` the same or inf outside its domain (the minimizer's line search,

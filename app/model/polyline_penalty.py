@@ -22,7 +22,7 @@ corners that press on each other (a slit's mouth) slide past each other at the c
 penetration (their nodes barely inside the other face), while the segments behind them pass through each
 other; their midpoints see that.
 
-The term is a function of the surface nodes' displacements only; :class:`SelfContact` evaluates its
+The term is a function of the surface nodes' displacements only; :class:`PolylinePenalty` evaluates its
 value, gradient and exact Hessian (the Gauss-Newton part plus g times the curvature of g; behind a concave
 joint the identity in x_p - x_v) on the gathered surface. What the fluid does in contact: nothing changes.
 The permeable surface stays at the bath's chemical potential where it touches itself: the walls of a crease
@@ -30,7 +30,6 @@ or fold still bound a film of the bath (a gel's surface is never sealed by a tou
 the same solvent), and the contact zones are short against the diffusion length, so the flux boundary
 condition is left as it is.
 """
-
 from __future__ import annotations
 
 import math
@@ -39,15 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from app.model.contact_surface import (  # noqa: F401
-    CONTACT_ROLES,
-    KAPPA_MAX,
-    STIFFEN,
-    ContactTerms,
-    Facet,
-    GatheredSurface,
-    connected_groups,
-)
+from app.model.contact_surface import connected_groups
 
 REACH = 0.5  # a point is paired with a segment it has passed by at most this times the segment's length
 OVERLAP = 1e-3  # the tunnel check: a segment's projection range [0, 1] widened by this at each end
@@ -140,7 +131,7 @@ def crossing_segments(x: np.ndarray, segments: np.ndarray, touching: bool = Fals
     return np.sort(np.stack([A[hit], B[hit]], axis=1), axis=1)
 
 
-class SelfContact:
+class PolylinePenalty:
     """The penalty on a surface of ``n`` nodes with reference positions ``X`` (n, 2) and segments
     ``segments`` (m, 2) of node indices, each ordered so that its right-hand normal points out of the
     body. ``stiffness`` is kappa mu (MPa). Its contact points are the nodes (point i: node i) and the
@@ -348,97 +339,10 @@ class SelfContact:
 GAP_LIMIT = 0.1
 
 
-class SurfaceContact(GatheredSurface):
-    """The self-contact penalty of a :class:`~app.model.problem.Problem`'s traction-free surface.
-
-    The surface's nodes (their reference positions and global displacement dofs) and its segments
-    (oriented outward) are gathered once on every rank; each evaluation gathers the surface nodes'
-    current displacement from their owners and computes the whole term on every rank (the surface is
-    a polyline of a few hundred nodes). The solvers add it to the energy, the residual and the Hessian
-    (:class:`app.solvers.newton.NewtonSolver`'s ``extra``)."""
-
-    name = "penalty"
-
-    def __init__(self, problem, kappa: float):
-        super().__init__(problem, kappa)
-        self.penalty = SelfContact(self.X, np.asarray(self.facets, np.int64).reshape(-1, 2), self.kappa * self._mu)
-
-    def order(self, facets: list[Facet]) -> list[Facet]:
-        """Each segment's midpoint, then its first end (a slit's two coincident faces run opposite ways)."""
-        return sorted(facets, key=lambda f: ((f.points[0][0] + f.points[1][0]) / 2,
-                                             (f.points[0][1] + f.points[1][1]) / 2, *f.points[0]))
-
-    def set_kappa(self, kappa: float) -> None:
-        self.kappa = float(kappa)
-        self.penalty.stiffness = self.kappa * self._mu
-
-    def state(self, owned_values) -> ContactState:
-        return self.penalty.pairs(self.displacement(owned_values))
-
-    def energy(self, owned_values) -> float:
-        return self.penalty.energy(self.displacement(owned_values))
-
-    def objective(self, owned_values) -> float:
-        """The term's energy, or inf outside its domain: where a node has tunnelled through the surface
-        beyond the pairing's reach (:meth:`SelfContact.tunnelled_crossings`). The minimizer's line search
-        then shortens the step; the penalty alone, which falls to zero beyond the reach, would let a step
-        tunnel a node through the surface and call it a decrease of the energy."""
-        return self.penalty.objective(self.displacement(owned_values))
-
-    def tunnelled_crossing(self, owned_values) -> tuple[float, float] | None:
-        """The reference midpoint of the first segment of a crossing with a tunnelled node, or None."""
-        found = self.penalty.tunnelled_crossings(self.displacement(owned_values))
-        if not len(found):
-            return None
-        pen = self.penalty
-        mid = 0.5 * (pen.X[pen.segments[found[0, 0], 0]] + pen.X[pen.segments[found[0, 0], 1]])
-        return float(mid[0]), float(mid[1])
-
-    def traction(self, owned_values) -> np.ndarray:
-        """The contact traction (n, 2) [MPa] on each surface node: the penalty's force on the node (minus its
-        gradient, from the pairs the node is in, on either side) over the node's tributary length (0 off
-        contact)."""
-        _, grad, _ = self.penalty.derivatives(self.displacement(owned_values), hessian=False)
-        return -grad / self.penalty.tributary[:, None]
-
-    def entry_blocks(self, owned_values) -> list:
-        """The Hessian's blocks at the state ``owned_values`` (owned part of a mixed-space array), as
-        (surface entries, H): entry 2 i + c is node i's displacement component c."""
-        return self.penalty.derivatives(self.displacement(owned_values))[2]
-
-    def terms(self, owned_values) -> ContactTerms:
-        """The energy and gradient at the state ``owned_values``, in the mixed space's global dofs."""
-        energy, grad, _ = self.penalty.derivatives(self.displacement(owned_values), hessian=False)
-        return ContactTerms(energy, self.global_entries, grad.reshape(-1))
-
-    def observables(self, owned_values) -> dict:
-        """history.csv's contact columns (app.model.history's "contact" group) at a state: the surface length in contact, the zones, the
-        deepest contact's reference place and its penetration (the penalty's gap)."""
-        state = self.state(owned_values)
-        pen = self.penalty
-        deepest = _deepest(state.points, state.gaps, pen.Xp) if len(state.points) else None
-        return {"contact_length_mm": pen.contact_length(state), "creases": len(pen.zones(state)),
-                "contact_x_mm": float(pen.Xp[deepest, 0]) if deepest is not None else float("nan"),
-                "contact_y_mm": float(pen.Xp[deepest, 1]) if deepest is not None else float("nan"),
-                "penetration_mm": float(-state.gaps.min()) if len(state.gaps) else 0.0}
-
-    def zone_summary(self, owned_values) -> list[dict]:
-        """The contact zones of a state: each one's contact points' reference x and y range and its length."""
-        state = self.state(owned_values)
-        pen = self.penalty
-        zones = []
-        for points in pen.zones(state):
-            X = pen.Xp[points]
-            zones.append({"x_mm": [float(X[:, 0].min()), float(X[:, 0].max())],
-                          "y_mm": [float(X[:, 1].min()), float(X[:, 1].max())],
-                          "length_mm": float(np.sum(pen.share[points]))})
-        return zones
-
-
 DEEPEST_TIE = 1e-6  # gaps within this fraction of the deepest are equally deep (a symmetric crease's two faces)
 
 
-def _deepest(nodes: np.ndarray, gaps: np.ndarray, X: np.ndarray) -> int:
+def deepest(nodes: np.ndarray, gaps: np.ndarray, X: np.ndarray) -> int:
     """The contact point (node or segment midpoint, reference positions ``X``) of the deepest contact: the least
     gap, and among gaps equal to it within DEEPEST_TIE (a crease's two faces penetrate each other equally by
     symmetry, and roundoff would pick either) the first in reference x, then y, so that the history's contact
