@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from app.model.patterns import classify_pattern, surface_spectrum, surface_texture
-from app.model.surface import PlaneSurface
+from app.model.shapes3d import PlaneSurface
 
 WAVELENGTH = 0.05
 
@@ -189,7 +189,7 @@ def test_what_is_not_a_herringbone(name, pattern):
 def test_the_texture_of_a_passage_is_not_computed_and_a_graded_grid_is_resampled():
     """A passage's profile keeps its angle but not its radius: no texture (its pattern comes from the spectrum).
     A herringbone on a grid graded along z is the same herringbone."""
-    from app.model.surface import CylinderSurface
+    from app.model.shapes3d import CylinderSurface
 
     th, z = np.meshgrid(np.linspace(0, 2 * np.pi, 24, endpoint=False), np.linspace(0, 1, 9), indexing="ij")
     pos = np.column_stack([th.ravel(), z.ravel()])

@@ -28,7 +28,7 @@ from mpi4py import MPI
 
 from app import config
 from app.io import checkpoint
-from app.model.surface import plane_count, plane_modes, plane_wave_vector
+from app.model.shapes3d import plane_count, plane_modes, plane_wave_vector
 from app.workflows.pipeline import run_case
 from app.workflows.run import simulate
 
@@ -234,7 +234,7 @@ def test_a_3d_tube_on_one_and_two_ranks(shared_tmp, comm):
 def test_the_wave_vector_of_an_analytic_field_on_a_cylinder(n, m):
     """cos(n theta + 0.3) cos(m pi z / L_z) (plus a uniform swelling) on 64 x 10 nodes of a passage: its
     (n, m), all of its energy there, whatever the phase around."""
-    from app.model.surface import CylinderSurface, cylinder_modes
+    from app.model.shapes3d import CylinderSurface, cylinder_modes
 
     r, Lz = 0.14, 0.1
     theta, z = np.meshgrid(np.linspace(0, 2 * math.pi, 64, endpoint=False), np.linspace(0, Lz, 10), indexing="ij")
@@ -285,7 +285,7 @@ def test_a_3d_tube_buckles_within_its_error_bar_of_the_polar_1d_minimum_also_on_
 def test_an_overhanging_surface_is_found_where_it_turns_over():
     """A plate's top displaced along x by u_x = a cos(k x) (and a small u_y): the surface overhangs only where
     dx/dX = 1 - a k sin(k X) < 0, which needs a k > 1, and it is found there."""
-    from app.model.surface import PlaneSurface
+    from app.model.shapes3d import PlaneSurface
 
     L, W, n = 0.1, 0.05, 40
     x, z = np.meshgrid(np.linspace(0, L, n + 1), np.linspace(0, W, n // 2 + 1), indexing="ij")

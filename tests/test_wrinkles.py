@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from app.model.surface import circumferential_wavenumber, wrinkle_count
+from app.model.shapes import circumferential_wavenumber, wrinkle_count
 
 L = 2.0
 X = np.linspace(0, L, 201)

@@ -74,7 +74,7 @@ class GeometrySetup:
     growth: str = "mean_normal"  # a growth measure of app.model.growth.GROWTH: mean_normal, mean_radial, vertex
     growth_point: tuple[float, float] | None = None
     growth_direction: tuple[float, float] | None = None  # inward unit vector at growth_point
-    wrinkles: str = "along"  # a surface shape of app.model.surface.SHAPES: along (open), around (closed)
+    wrinkles: str = "along"  # a surface shape of app.model.shapes.SHAPES: along (open), around (closed)
     plot_band: float | None = None  # bilayer: plot only this depth under the surface [mm]
     drive: Drive | None = None  # the boundary a displacement loading moves (None: none)
     info: dict = field(default_factory=dict)

@@ -139,7 +139,7 @@ def surface_shape_of(xyz, asked: str, path) -> str:
     """The 3D surface shape (``plane`` or ``cylinder``) on which a user mesh's modes are described, checked on
     the permeable surface's node coordinates ``xyz`` (all ranks'): flat across a coordinate axis, or at one
     radius about the z axis, with the nodes on a tensor grid of the two surface coordinates (as
-    :class:`app.model.surface.PlaneSurface` and ``CylinderSurface`` read them: in-plane coordinates, or the angle
+    :class:`app.model.shapes3d.PlaneSurface` and ``CylinderSurface`` read them: in-plane coordinates, or the angle
     around and z). ConfigError naming
     geometry.surface (or geometry.file) otherwise."""
     import numpy as np

@@ -46,7 +46,7 @@ def mode_plot(polys, profile, geo, crossing, path) -> None:
 
     X, U, M, layer = polys
     x_prof, y_prof, xlabel, ylabel = profile
-    from app.model.surface import SHAPES
+    from app.model.shapes import SHAPES
 
     around = SHAPES.get(geo.wrinkles).closed
     size = np.ptp(X[:, :, 0]) if not around else max(np.ptp(X[:, :, 0]), np.ptp(X[:, :, 1]))
@@ -238,7 +238,7 @@ def modes_gallery(rows: list[dict], outdir, title: str, path) -> None:
     deformed passage outline of a tube."""
     import numpy as np
 
-    from app.model.surface import along_profile, around_profile
+    from app.model.shapes import along_profile, around_profile
 
     cases = [r for r in rows if (outdir / r["directory"] / "mode_surface.csv").is_file()]
     if not cases:

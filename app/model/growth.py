@@ -9,7 +9,9 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from app import compat
-from app.model.surface import around_profile, boundary_displacement, trapezoid_weights
+from app.model.shapes import around_profile
+from app.model.shapes3d import trapezoid_weights
+from app.model.surface import boundary_displacement
 from app.registry import Registry
 
 

@@ -21,8 +21,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from app.model.surface import (SurfaceProfiles, SurfaceShape, cylinder_modes, on_grid, periodic_weights, plane_modes,
-                               trapezoid_weights)
+from app.model.shapes import SurfaceShape
+from app.model.shapes3d import cylinder_modes, on_grid, periodic_weights, plane_modes, trapezoid_weights
+from app.model.surface import SurfaceProfiles
 
 PATTERN_MULTIPLES = (1.1, 1.25, 1.5, 2.0)  # growth / g_c of the states a 3D branch's pattern is reported at
 DOMINANT = 0.6  # a single shape (or an orthogonal pair) holding this fraction of the surface's squared norm
@@ -38,8 +39,8 @@ WINDOW = 1.0 / 3.0  # the structure tensor's Gaussian window: this fraction of t
 
 def surface_spectrum(shape: SurfaceShape, position: np.ndarray, profile: np.ndarray) -> list[tuple[int, int, float]]:
     """A 3D surface profile's shapes (i, j, fraction of its squared norm), strongest first: (m, n) half-waves
-    along x and z on a plate (:func:`app.model.surface.plane_modes`), (n around, m along the axis) on a passage
-    (:func:`app.model.surface.cylinder_modes`)."""
+    along x and z on a plate (:func:`app.model.shapes3d.plane_modes`), (n around, m along the axis) on a passage
+    (:func:`app.model.shapes3d.cylinder_modes`)."""
     if shape.name == "cylinder":
         energy = cylinder_modes(position, profile)
     else:

@@ -12,6 +12,7 @@ import numpy as np
 from app.model.contact_surface import ContactTerms, Facet, GatheredSurface
 from app.model.polyline_penalty import ContactState, PolylinePenalty, deepest
 
+
 class PenaltyContact(GatheredSurface):
     """The self-contact penalty of a :class:`~app.model.problem.Problem`'s traction-free surface.
 

@@ -17,11 +17,11 @@ from dolfinx import fem
 
 from app import compat
 from app.geometry import GeometrySetup
-from app.model.penalty import PenaltyContact
 from app.model.growth import GROWTH
 from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.loading import BoundaryConditions, Loading
 from app.model.material import Material
+from app.model.penalty import PenaltyContact
 from app.model.potential import CompiledForms, build, fields_class
 from app.model.surface import surface_shape
 

@@ -333,7 +333,7 @@ class NoStabilityTest:
 
 def _waves(crossing, problem) -> str:
     """A 3D crossing's critical wave vectors for its log line, named by the problem's surface
-    (:attr:`app.model.surface.SurfaceShape.wave_label`); '' in 2D."""
+    (:attr:`app.model.shapes.SurfaceShape.wave_label`); '' in 2D."""
     waves = [tuple(m["wave_vector"]) for m in crossing.modes[:crossing.multiplicity] if "wave_vector" in m]
     if not waves:
         return ""
