@@ -20,7 +20,9 @@ from app.onset.policy import CrossingPolicy
 from app.onset.tracker import StabilitySettings
 from app.reduced.section import Layer, NotReducible, Section
 from app.solvers.newton import SolverSettings
-from app.solvers.stepping import SteppedProblem, TimeSettings, TimeStepper
+from app.solvers.step_control import TimeSettings
+from app.solvers.stepped_problem import SteppedProblem
+from app.solvers.stepping import TimeStepper
 
 
 def layer_materials(cfg: dict, names=("film", "substrate")) -> dict[str, Material]:
@@ -99,8 +101,8 @@ def stepped_problem(p: Problem) -> SteppedProblem:
     """What the time stepper advances of a problem: its forms, conditions, index sets and hooks."""
     return SteppedProblem(p.forms.energy, p.forms.residual, p.forms.hessian, p.bcs, p.w, p.state, p.u_dofs,
                           p.q_dofs, p.comm, cell_content_change(p), tuple(p.loading.kinks()), p.diffusion,
-                          p.set_time, p.step_influx, partial(history.record, p), getattr(p, "contact", None),
-                          uptake="fluid_volume")
+                          p.set_time, p.step_influx, partial(history.record, p), p.accept_step,
+                          getattr(p, "contact", None), uptake="fluid_volume")
 
 
 def time_stepper(p: Problem, time: TimeSettings, solver: SolverSettings, log=None, limits: bool = True,

@@ -89,8 +89,8 @@ MUTATIONS = [
      'assert pathlib.Path(app.__file__).resolve().parent == pathlib.Path(sys.argv[1]).resolve() / "app"\n'
      'PYCHECK\n}\n',
      ["tests/test_console.py::test_install_into_fresh_venv_creates_console_script"]),
-    ("accumulated flux not accumulated (Q_n = dQ)", "app/solvers/stepping.py",
-     r"state\[s\.q_dofs\] \+= w\[s\.q_dofs\]", "state[s.q_dofs] = w[s.q_dofs]",
+    ("accumulated flux not accumulated (Q_n = dQ)", "app/model/problem.py",
+     r"state\[self\.q_dofs\] \+= w\[self\.q_dofs\]", "state[self.q_dofs] = w[self.q_dofs]",
      ["tests/test_physics.py"]),
     ("bench keeps a repeated --sizes entry", "app/workflows/bench.py",
      r"if twice:", "if False:",

@@ -6,7 +6,7 @@ from conftest import run_to_end, small_bilayer
 from mpi4py import MPI
 
 from app.model import history
-from app.solvers.stepping import StepRecord
+from app.solvers.stepped_problem import StepRecord
 
 # the surface's amplitude and wrinkle count are roundoff on these unbuckled paths (tests/test_postbuckling.py
 # compares them on a branch)

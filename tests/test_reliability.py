@@ -17,6 +17,7 @@ from app import config, factory
 from app.model.theory import constrained_layer_stretch
 from app.onset.criteria import rate_matrix
 from app.solvers import newton, stepping
+from app.solvers.stepped_problem import StepFailure
 from app.workflows.run import simulate
 
 H = 0.01  # layer thickness [mm]: substrate 0.005 + film 0.005 of the same material
@@ -89,7 +90,7 @@ def _near_equilibrium_run(comm, floor: bool, monkeypatch):
     try:
         while not st.done():
             rows.append(st.advance())
-    except stepping.StepFailure as err:
+    except StepFailure as err:
         failure = str(err)
     out = (p, rows, failure, st.failed_solves, st.solver.floor_accepted)
     st.destroy()

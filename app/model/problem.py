@@ -180,6 +180,13 @@ class Problem:
         if self._driven is not None:
             self._driven.x.array[:] = self.loading.applied_displacement(t)
 
+    def accept_step(self) -> None:
+        """The converged step becomes the state: the unknown w holds (u, dQ) of the step, the state (u_n, Q_n)
+        becomes (u, Q_n + dQ)."""
+        w, state = self.w.x.array, self.state.x.array
+        state[self.u_dofs] = w[self.u_dofs]
+        state[self.q_dofs] += w[self.q_dofs]
+
     # --- observables of the converged state ------------------------------------------------
 
     def growth(self) -> float:

@@ -22,7 +22,7 @@ from app import compat
 from app.model.polyline_penalty import GAP_LIMIT, crossing_segments
 from app.model.kinematics import deformation_gradient
 from app.model.surface import boundary_displacement, shape_of
-from app.solvers.stepping import ModelLimit
+from app.solvers.stepped_problem import ModelLimit
 
 NO_CONTACT = ("without stability.contact the surface may pass through itself and no element may invert, the "
               "branch cannot be followed further")
@@ -38,7 +38,8 @@ class Limit:
     consequence: str = NO_CONTACT
     overshoot: bool = False  # a converged state that a shorter step may avoid (the stepper retries it)
     depth: float = 0.0  # a penetration that a stiffer penalty may hold, in elements (0: none)
-    stiffened: bool = False  # the penalty was raised: the stepper solves the same step again
+    retry: str | None = None  # a converged state the stepper retries: "same" (the penalty was raised: the same
+    # step again) or "shorter" (an overshoot a shorter step may avoid)
 
 
 INVERTED = "the model has no inverted elements, the branch cannot be followed further"
@@ -168,7 +169,7 @@ class ModelLimits:
     iterate), and the rule for failed attempts. The :class:`~app.solvers.stepping.TimeStepper` builds one
     when it starts to follow minimizers and tells it of every step (``new_step``), failed attempt
     (``failed_attempt``), cut-back below dt_min (``out_of_steps``) and accepted state (``accepted``); it
-    raises :class:`~app.solvers.stepping.ModelLimit`, which ends the run with the limit's status.
+    raises :class:`~app.solvers.stepped_problem.ModelLimit`, which ends the run with the limit's status.
 
     One failed attempt whose last iterate folds or inverts may be an overshoot that a shorter step avoids;
     when a second attempt of the same step does too, the branch itself runs into the limit."""
@@ -220,11 +221,13 @@ class ModelLimits:
         carries farther is missed. With ``retry`` (a shorter step is left) that limit is returned and the
         stepper cuts the step back; without, it ends the run. A state that penetrates deeper than GAP_LIMIT of
         its element raises the penalty (:meth:`app.model.penalty.PenaltyContact.stiffen`) and is returned with
-        ``stiffened``: the stepper solves the same step again; past KAPPA_MAX it ends the run."""
+        ``retry = "same"``: the stepper solves the same step again; past KAPPA_MAX it ends the run. A limit returned
+        for a shorter step has ``retry = "shorter"``."""
         limit = self._of(array)
         if limit is None:
             return None
         if limit.overshoot and retry:
+            limit.retry = "shorter"
             return limit
         if limit.depth:  # the penalty's own accuracy: raised until it holds the state, up to KAPPA_MAX
             before, self._overrun = self._overrun, limit.depth
@@ -237,10 +240,10 @@ class ModelLimits:
                 limit.detail += (f", not reduced by raising the penalty to {old:g}: the surface is locked "
                                  "through itself")
                 if retry:
-                    limit.overshoot = True
+                    limit.overshoot, limit.retry = True, "shorter"
                     return limit
             elif self.p.contact.stiffen(t):
-                limit.stiffened = True
+                limit.retry = "same"
                 limit.detail += f": the penalty is raised from {old:g} to {self.p.contact.kappa:g}"
                 return limit
             else:

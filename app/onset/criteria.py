@@ -135,7 +135,11 @@ class LossOfStability:
     (:meth:`app.solvers.stepping.TimeStepper._diagnose`): ``check(dt)`` tests the converged state with the
     "rate" criterion at tau = dt (K as Newton sees it), then, where fluid can move in or out, with the drained
     criterion, stopping at the first with negative eigenvalues. Returns (what was tested, its negative
-    eigenvalues) for each test run."""
+    eigenvalues) for each test run. ``remedy``: what a user can do once the state has lost stability, which the
+    stepper's :class:`~app.solvers.stepped_problem.LostStability` message ends with."""
+
+    remedy = ("enable the stability test (stability.enabled = true, stability.criterion = drained) to locate the "
+              "onset and its mode, and stability.after_onset = \"branch\" to follow the buckled branch")
 
     def __init__(self, problem):
         self.problem = problem

@@ -1,4 +1,4 @@
-"""The [time] and [solver] keys: the time stepper's step control (app.solvers.stepping.TimeSettings) and
+"""The [time] and [solver] keys: the time stepper's step control (app.solvers.step_control.TimeSettings) and
 Newton's tolerances and linear solves (app.solvers.newton.SolverSettings)."""
 
 from __future__ import annotations

@@ -81,3 +81,22 @@ class StepControl:
         if not (math.isfinite(err_prev) and err_prev > 0 and dt_prev > 0):
             return 1.0
         return (err / dt**2) / (err_prev / dt_prev**2)
+
+
+@dataclass(frozen=True)
+class TimeSettings:
+    """The [time] table: end time, step-size limits and control."""
+
+    end: float
+    dt_initial: float
+    dt_min: float
+    dt_max: float
+    tolerance: float
+    adaptive: bool = True
+    max_steps: int = 100000
+    stop_at_equilibrium: float = 0.0  # threshold of the relative uptake rate (0 = off)
+    controller: str = "predictive"  # the adaptive step's rule (app.solvers.step_control)
+
+    def step_control(self) -> StepControl:
+        return StepControl(self.tolerance, self.dt_min, self.dt_max, self.adaptive, self.dt_initial,
+                           self.controller)

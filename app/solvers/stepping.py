@@ -15,145 +15,16 @@ cannot know, the history restarts. Below ``time.dt_min`` the run fails with a :c
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
-
 import numpy as np
 from mpi4py import MPI
 
 from app import compat
 from app.solvers.newton import NewtonResult, NewtonSolver, SolverSettings
-from app.solvers.step_control import StepControl
-
-
-@dataclass(frozen=True)
-class TimeSettings:
-    """The [time] table: end time, step-size limits and control."""
-
-    end: float
-    dt_initial: float
-    dt_min: float
-    dt_max: float
-    tolerance: float
-    adaptive: bool = True
-    max_steps: int = 100000
-    stop_at_equilibrium: float = 0.0  # threshold of the relative uptake rate (0 = off)
-    controller: str = "predictive"  # the adaptive step's rule (app.solvers.step_control)
-
-    def step_control(self) -> StepControl:
-        return StepControl(self.tolerance, self.dt_min, self.dt_max, self.adaptive, self.dt_initial,
-                           self.controller)
+from app.solvers.step_control import TimeSettings
+from app.solvers.stepped_problem import LostStability, Snapshot, SteppedProblem, StepFailure, StepRecord
 
 
 ENERGY_INCREASED = -101  # a minimizer solve whose energy ended above its initial guess's (a rejection)
-
-
-class StepFailure(RuntimeError):
-    """The step could not be completed even at the smallest allowed step size."""
-
-
-class ModelLimit(StepFailure):
-    """The branch reached a state the model cannot represent (:mod:`app.onset.contact`): the run ends with
-    the limit's status ("contact" or "inverted")."""
-
-    def __init__(self, limit, t: float, accepted: float | None = None):
-        """``t``: the state's time; ``accepted``: for the iterates of a step that failed, the time of the last
-        accepted state (which passed the checks)."""
-        self.limit, self.t = limit, t
-        when = (f"at t = {t:.6g} s" if accepted is None else
-                f"in the Newton iterates of two attempts of the step after t = {accepted:.6g} s (the last one to "
-                f"t = {t:.6g} s; the accepted state at {accepted:.6g} s passed the checks)")
-        super().__init__(f"{limit.detail} {when}: {limit.consequence}")
-
-
-class LostStability(StepFailure):
-    """Newton failed twice in a row for the same reason and K at the last converged state is
-    indefinite: the fundamental path cannot be followed (see :meth:`TimeStepper.advance`)."""
-
-
-@dataclass
-class StepRecord:
-    """One accepted state: the stepper's own columns, the model's (``values``: the SteppedProblem's
-    ``observables`` at that time, :mod:`app.model.history`) and what others add (``extra``: the onset
-    tracker's). A model column reads as an attribute too (``rec.growth_mm``)."""
-
-    step: int
-    time: float
-    dt: float
-    newton_its: int
-    inflow: float  # the fluid volume that entered since t = 0 (the SteppedProblem's influx, step by step)
-    error_estimate: float = float("nan")
-    values: dict = field(default_factory=dict)
-    extra: dict = field(default_factory=dict)
-
-    COLUMNS = ("step", "time", "dt", "newton_its", "inflow", "error_estimate")  # the stepper's own
-
-    def __getattr__(self, name: str):
-        if name.startswith("__") or name in ("values", "extra"):  # copies and pickles look before __init__
-            raise AttributeError(name)
-        try:
-            return self.values[name]
-        except KeyError:
-            raise AttributeError(f"StepRecord has no column {name!r}") from None
-
-    def row(self) -> dict:
-        """The history row: every column by name."""
-        return {**{c: getattr(self, c) for c in self.COLUMNS}, **self.values, **self.extra}
-
-
-@dataclass
-class Snapshot:
-    """Everything needed to resume time stepping from an accepted state."""
-
-    state: np.ndarray
-    rate_u: np.ndarray
-    dQ_prev: np.ndarray
-    dt_prev: float
-    history_valid: bool
-    t: float
-    step: int
-    inflow: float
-    dt_next: float
-    err_prev: float = float("nan")  # the last accepted step's error estimate (NaN: none since a kink)
-
-    #: the scalars a checkpoint stores with the arrays (in this order)
-    SCALARS: ClassVar[tuple[str, ...]] = ("dt_prev", "history_valid", "t", "step", "inflow", "dt_next",
-                                          "err_prev")
-
-    def scalars(self) -> dict:
-        return {k: getattr(self, k) for k in self.SCALARS}
-
-    @classmethod
-    def from_parts(cls, state: np.ndarray, rate_u: np.ndarray, dQ_prev: np.ndarray, scalars: dict) -> Snapshot:
-        """``scalars`` of a checkpoint written before err_prev was stored resume without it (NaN: the next
-        step's proposal follows the elementary rule once)."""
-        values = {k: scalars[k] for k in cls.SCALARS if k in scalars}
-        return cls(state, rate_u, dQ_prev, **values)
-
-
-@dataclass(frozen=True)
-class SteppedProblem:
-    """What the stepper advances, as forms, conditions, index sets and the model's hooks (the stepper reads
-    nothing else; :func:`app.factory.time_stepper` fills it from a problem)."""
-
-    energy: Any  # compiled forms of the incremental potential Pi_tau(u, dQ), its residual and Hessian
-    residual: Any
-    hessian: Any
-    bcs: list  # Dirichlet conditions on the unknown
-    w: Any  # the unknown (u, dQ) of the current step (a Function of the mixed space)
-    state: Any  # the converged state (u_n, Q_n), same space
-    u_dofs: np.ndarray  # the mixed space's displacement and flux dofs (local indices)
-    q_dofs: np.ndarray
-    comm: Any
-    content_change: Any  # app.model.operators.CellContentChange: the error estimate's cell averages
-    kinks: tuple  # times where the loading's rate jumps
-    diffusion: bool  # whether fluid moves (tau enters the potential)
-    set_time: Callable[[float, float], None]  # (t, tau): the loading at t for a step of size tau
-    influx: Callable[[], float]  # fluid volume entering through the permeable surface in the current step
-    observables: Callable[[float], dict]  # the converged state's history columns at time t (StepRecord.values)
-    extra: Any = None  # an energy term that is not a form (self-contact; NewtonSolver's ``extra``), or None
-    uptake: str | None = None  # the observable whose relative rate time.stop_at_equilibrium tests (None: never)
 
 
 class TimeStepper:
@@ -388,11 +259,11 @@ class TimeStepper:
             if checks is not None:  # the checks read the displacement dofs: w's are the new ones
                 new_dt = control.cut_back(dt)
                 limit = checks.accepted(self.system.w.x.array, self.t + dt, retry=new_dt >= control.dt_min)
-                if limit is not None and limit.stiffened:  # a stiffer contact penalty: the same step again
+                if limit is not None and limit.retry == "same":  # the model changed (a stiffer contact): again
                     self.rejected += 1
                     self.log(f"  the step to t = {self.t + dt:.6g} s: {limit.detail}; solving it again")
                     continue
-                if limit is not None:  # an overshoot of the contact pairing: rejected, a shorter step tried
+                if limit is not None:  # limit.retry == "shorter" (an overshoot): rejected, a shorter step tried
                     self.rejected += 1
                     self.log(f"  the step to t = {self.t + dt:.6g} s (dt = {dt:.3g} s) overshoots: {limit.detail}; "
                              f"cutting back to {new_dt:.3g} s")
@@ -427,11 +298,11 @@ class TimeStepper:
             if nneg > 0:
                 found.append(f"{what} has {nneg} negative eigenvalue(s)")
         if found and not self.minimizing:
+            remedy = getattr(self.check, "remedy", "")
             raise LostStability(
                 f"the state lost stability at t = {self.t:.6g} s ({found[0]}; Newton failed {failures} times on "
-                f"this step, the last two with SNES reason {reason}): the fundamental path cannot be followed; "
-                f"enable the stability test (stability.enabled = true, stability.criterion = drained) to locate "
-                f"the onset and its mode, and stability.after_onset = \"branch\" to follow the buckled branch")
+                f"this step, the last two with SNES reason {reason}): the fundamental path cannot be followed"
+                + (f"; {remedy}" if remedy else ""))
 
     def at_equilibrium(self, rec: StepRecord) -> bool:
         """time.stop_at_equilibrium: whether the run has reached its equilibrium with the held loading.
@@ -464,8 +335,7 @@ class TimeStepper:
         w, state = s.w.x.array, s.state.x.array
         self.rate_u[:] = w[s.u_dofs] - state[s.u_dofs]
         self.dQ_prev[:] = w[s.q_dofs]
-        state[s.u_dofs] = w[s.u_dofs]  # the new state: u_n = u, Q_n += dQ
-        state[s.q_dofs] += w[s.q_dofs]
+        s.accept()
         prev = (self.dt_prev, self.err_prev)
         self.dt_prev = dt
         self.t += dt

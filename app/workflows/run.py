@@ -21,7 +21,8 @@ from app.model.surface import SurfaceProfiles, shape_of, surface_profile
 from app.onset.contact import contact_summary
 from app.onset.tracker import StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
-from app.solvers.stepping import ModelLimit, StepFailure, StepRecord, TimeSettings
+from app.solvers.step_control import TimeSettings
+from app.solvers.stepped_problem import ModelLimit, StepFailure, StepRecord
 
 ASSUMPTIONS = (
     "material.shear_modulus (gamma_s) defaults to 0.1 MPa: the paper gives only ratios gamma_f/gamma_s",
