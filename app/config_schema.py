@@ -1,7 +1,8 @@
 """The config schema: every key a user may write, its type, default and allowed range, table by table.
 
-Each component declares its own keys (geometry/keys.py, model/keys.py, solvers/keys.py, onset/keys.py,
-reduced/keys.py, io/keys.py); the geometry, material, loading and stability tables are built from the
+Each component below config declares its own keys (geometry/keys.py, model/keys.py, solvers/keys.py,
+onset/keys.py, reduced/keys.py); the [output] table, read by the writer above config (io), is declared here;
+the geometry, material, loading and stability tables are built from the
 registered geometry kinds, material laws, loadings and criteria each time the schema is asked for, so one
 registered later (by a test, a plugin) is part of it at once. :mod:`app.config` reads and checks a config
 against it.
@@ -12,15 +13,23 @@ from __future__ import annotations
 import copy
 
 from app.geometry.keys import MESH
-from app.io.keys import OUTPUT
 from app.model.keys import QUADRATURE
 from app.onset.keys import STABILITY
 from app.reduced.keys import KEYS as REDUCED
-from app.schema import Key, unset
+from app.schema import Key, ge, unset
 from app.schema import gt as _gt
 from app.schema import key as _key
 from app.schema import one_of as _one_of
 from app.solvers.keys import SOLVER, TIME
+
+#: the [output] keys: what a run writes (app.io.output.OutputSettings reads them)
+OUTPUT: dict[str, Key] = {
+    "fields": _key(bool, True, None, "write fields.xdmf"),
+    "every": _key(int, 1, ge(1), "write fields every n accepted steps"),
+    "plot": _key(bool, True, None, "write history.png"),
+    "checkpoint_every": _key(int, 10, ge(0), "write checkpoint.npz every n accepted steps (and when "
+                             "interrupted), for 'run --resume'; 0 = off"),
+}
 
 _STATIC: dict[str, dict[str, Key] | dict] = {
     "geometry": {},  # built from the registered geometry kinds: see _geometry_table
