@@ -20,7 +20,7 @@
 
 - :class:`HeldContent`: the body at the fluid content of a transient run's flat state, held in every cell at
   every load time (``content(t, Y)``: a laterally uniform content field, from the exact 1D transient,
-  :class:`app.reduced.transient.ContentProfile`). The energy is the grand potential at that content, whose
+  :class:`app.reduced.content.ContentProfile`). The energy is the grand potential at that content, whose
   difference between two states at one time is the difference of their stored energy: a crease that forms
   faster than the fluid moves (undrained) on the state the run has reached, wherever its diffusion stands.
 

@@ -25,7 +25,8 @@ from app import config, factory, geometry, logging_setup
 from app.model import theory
 from app.onset.creases import CreaseFailed, CreaseTrial
 from app.onset.maxwell import level_onset, load_text
-from app.reduced.transient import TransientFailed, content_profile
+from app.reduced.content import content_profile
+from app.reduced.transient import TransientFailed
 from app.workflows.convergence import richardson
 from app.workflows.reduced import settings as reduced_settings
 
@@ -150,7 +151,7 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
 
 
 def _content_profile(cfg: dict, comm, log):
-    """The run's laterally uniform transient content (:func:`app.reduced.transient.content_profile`) to
+    """The run's laterally uniform transient content (:func:`app.reduced.content.content_profile`) to
     time.end, at the 1D reduction's resolution (its [reduced] keys): computed on rank 0, broadcast."""
     profile, error = None, None
     if comm.rank == 0:
