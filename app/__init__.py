@@ -14,7 +14,16 @@ The Python API (:mod:`app.api`) is re-exported here::
 Its names are imported on first use, so ``import app`` (and the command line) stays light.
 """
 
+import os
+
 from app.version import __version__
+
+# PT-Scotch, dolfinx's graph partitioner on both stacks, partitions with threads, and with more than one
+# thread the same mesh on the same ranks comes out with its parts given to the ranks in either order (measured
+# on 2 ranks: 2 runs in 10 swapped), so the roundoff, and past an unstable state the branch taken, differed
+# between identical runs. One thread makes the layout a function of the mesh and the rank count. Set before
+# any of hydrobuckle's modules imports dolfinx (read when a mesh is partitioned); a user's own setting is kept.
+os.environ.setdefault("SCOTCH_PTHREAD_NUMBER", "1")
 
 __all__ = ["ConfigError", "Result", "Study", "load_config", "load_result", "run", "run_reduced", "studies",
            "study", "sweep"]

@@ -49,7 +49,7 @@ from conftest import (
 from dolfinx import fem
 from mpi4py import MPI
 
-from app import compat, config, factory
+from app import config, factory, fem_utils
 from app.cli import main
 from app.io import checkpoint, result_identity
 from app.io.dof_layout import KEY_BASE, DofLayout
@@ -138,7 +138,7 @@ def _flux_mismatch(p, a: np.ndarray, b: np.ndarray) -> float:
 
     def size(f):
         form = ((ufl.dot(f("+"), n("+"))) ** 2 * ufl.dS + ufl.dot(f, n) ** 2 * ufl.ds + ufl.dot(f, f) * ufl.dx)
-        return compat.assemble_scalar(fem.form(form), p.comm)
+        return fem_utils.assemble_scalar(fem.form(form), p.comm)
 
     return math.sqrt(size(e) / size(r))
 

@@ -22,10 +22,10 @@ from cases import TINY_BILAYER_TOML
 from conftest import PYTHON, REPO, on_rank0, read_csv, read_json, run_child, run_to_end, write_on_rank0
 from mpi4py import MPI
 
-from app import cli, compat, config, geometry
+from app import cli, config, fem_utils, geometry
+from app.model.material import chemical_potential
 from app.workflows import studies
 from app.workflows.convergence import refined_configs, richardson
-from app.model.material import chemical_potential
 from app.workflows.run import simulate
 
 # A bilayer that buckles in about 0.4 s (0.15 mm wide, 15 x 2 film elements).
@@ -298,7 +298,7 @@ def test_mesh_command_writes_the_builtin_mesh(shared_tmp, comm, capsys, text, ce
     if comm.rank == 0:
         assert f"wrote {msh}" in capsys.readouterr().out
     builtin = geometry.build(config.load(cfg_path), comm).tm
-    n_cells = compat.num_global_cells(builtin.mesh)
+    n_cells = fem_utils.num_global_cells(builtin.mesh)
     contents = on_rank0(_msh_contents, msh)
     assert sorted(n for d, n in contents if d == 2) == cells
     assert sorted(n for d, n in contents if d == 1) == facets
@@ -310,10 +310,10 @@ def test_mesh_command_writes_the_builtin_mesh(shared_tmp, comm, capsys, text, ce
     from app.geometry import msh as mshmod
 
     tm = mshmod.read(comm, msh)
-    assert compat.num_global_cells(tm.mesh) == n_cells
+    assert fem_utils.num_global_cells(tm.mesh) == n_cells
     for name in cells:
-        assert comm.allreduce(int(np.sum(tm.cells(name) < compat.num_owned_cells(tm.mesh)))) == \
-            comm.allreduce(int(np.sum(builtin.cells(name) < compat.num_owned_cells(builtin.mesh))))
+        assert comm.allreduce(int(np.sum(tm.cells(name) < fem_utils.num_owned_cells(tm.mesh)))) == \
+            comm.allreduce(int(np.sum(builtin.cells(name) < fem_utils.num_owned_cells(builtin.mesh))))
     for name in facets:
         assert _global_facets(tm, name, comm) == _global_facets(builtin, name, comm)
 

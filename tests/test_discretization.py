@@ -6,14 +6,16 @@ import pytest
 import ufl
 from conftest import small_bilayer
 from dolfinx import fem
+from dolfinx import mesh as dmesh
+from dolfinx.fem import petsc as fem_petsc
 from petsc4py import PETSc
 
-from app import compat, factory
+from app import compat, factory, fem_utils
 
 
 def distorted_mesh(comm, n=6):
     """Unit square of quads mapped by a smooth nonlinear map: cells are general (non-affine) quads."""
-    domain = compat.rectangle_quads(comm, (0, 0), (1, 1), (n, n))
+    domain = dmesh.create_rectangle(comm, [np.array([0, 0], float), np.array([1, 1], float)], [n, n], cell_type=dmesh.CellType.quadrilateral)
     x = domain.geometry.x
     X, Y = x[:, 0].copy(), x[:, 1].copy()
     x[:, 0] = X + 0.06 * np.sin(np.pi * X) * np.sin(2 * np.pi * Y) + 0.1 * X * Y
@@ -29,22 +31,22 @@ def test_rtcf_in_mixed_space_satisfies_divergence_theorem(comm):
     domain = distorted_mesh(comm)
     W = compat.mixed_displacement_flux_space(domain)
     w = fem.Function(W)
-    _, q_dofs = compat.collapse(W.sub(1))
+    _, q_dofs = fem_utils.collapse(W.sub(1))
     rng = np.random.default_rng(7 + comm.rank)
     w.x.array[q_dofs] = rng.standard_normal(len(q_dofs))
     w.x.scatter_forward()
     _, Q = ufl.split(w)
     n = ufl.FacetNormal(domain)
-    lhs = compat.assemble_scalar(fem.form(ufl.div(Q) * ufl.dx), comm)
-    rhs = compat.assemble_scalar(fem.form(ufl.dot(Q, n) * ufl.ds), comm)
+    lhs = fem_utils.assemble_scalar(fem.form(ufl.div(Q) * ufl.dx), comm)
+    rhs = fem_utils.assemble_scalar(fem.form(ufl.dot(Q, n) * ufl.ds), comm)
     assert abs(lhs - rhs) < 1e-11 * max(1.0, abs(rhs))
     # cell-wise too: int_K div Q = int_dK Q.n for every cell K. Testing with the DG0 indicator v0 of
     # each cell, the boundary side collects every facet of K with K's own trace and outward normal
     # (interior facets from both sides, '+' and '-'; ghosted facets are summed by the reverse scatter).
     V0 = compat.scalar_space(domain, "DG", 0)
     v0 = ufl.TestFunction(V0)
-    vol = compat.assemble_vector(fem.form(ufl.div(Q) * v0 * ufl.dx))
-    surf = compat.assemble_vector(fem.form(
+    vol = fem_utils.assemble_vector(fem.form(ufl.div(Q) * v0 * ufl.dx))
+    surf = fem_utils.assemble_vector(fem.form(
         ufl.dot(Q, n) * v0 * ufl.ds
         + (ufl.dot(Q("+"), n("+")) * v0("+") + ufl.dot(Q("-"), n("-")) * v0("-")) * ufl.dS))
     n_owned = V0.dofmap.index_map.size_local
@@ -53,9 +55,9 @@ def test_rtcf_in_mixed_space_satisfies_divergence_theorem(comm):
     assert np.abs(vol - surf).max() < 1e-12 * np.abs(surf).max()  # measured 1.3e-15 abs (values ~3)
     # and the normal component is continuous (H(div)): Q.n seen from both sides cancels on every
     # interior facet (measured jump^2 integral 1e-29 against 3e2 for (Q.n)^2)
-    jump = compat.assemble_scalar(fem.form((ufl.dot(Q("+"), n("+")) + ufl.dot(Q("-"), n("-"))) ** 2 * ufl.dS),
+    jump = fem_utils.assemble_scalar(fem.form((ufl.dot(Q("+"), n("+")) + ufl.dot(Q("-"), n("-"))) ** 2 * ufl.dS),
                                   comm)
-    size = compat.assemble_scalar(fem.form(ufl.dot(Q("+"), n("+")) ** 2 * ufl.dS), comm)
+    size = fem_utils.assemble_scalar(fem.form(ufl.dot(Q("+"), n("+")) ** 2 * ufl.dS), comm)
     assert jump < 1e-24 * size
 
 
@@ -76,15 +78,15 @@ def test_mixed_rtcf_matches_plain_rtcf(comm):
     dx = ufl.dx(metadata={"quadrature_degree": 8})
     for expr in (lambda Q: ufl.dot(Q, Q) * dx, lambda Q: ufl.div(Q) ** 2 * dx,
                  lambda Q: ufl.dot(Q, n) * ufl.ds):
-        a = compat.assemble_scalar(fem.form(expr(Qm)), comm)
-        b = compat.assemble_scalar(fem.form(expr(q)), comm)
+        a = fem_utils.assemble_scalar(fem.form(expr(Qm)), comm)
+        b = fem_utils.assemble_scalar(fem.form(expr(q)), comm)
         assert a == pytest.approx(b, rel=1e-12, abs=1e-14)
     # mass matrices agree up to the dof permutation: compare permutation-invariant norms
-    Mm = compat.create_matrix(fem.form(ufl.dot(ufl.TrialFunction(W), ufl.TestFunction(W)) * ufl.dx))
-    compat.assemble_matrix_into(Mm, fem.form(ufl.dot(ufl.split(ufl.TrialFunction(W))[1],
+    Mm = fem_petsc.create_matrix(fem.form(ufl.dot(ufl.TrialFunction(W), ufl.TestFunction(W)) * ufl.dx))
+    fem_utils.assemble_matrix_into(Mm, fem.form(ufl.dot(ufl.split(ufl.TrialFunction(W))[1],
                                                         ufl.split(ufl.TestFunction(W))[1]) * ufl.dx), [])
-    Mp = compat.create_matrix(fem.form(ufl.dot(ufl.TrialFunction(V), ufl.TestFunction(V)) * ufl.dx))
-    compat.assemble_matrix_into(Mp, fem.form(ufl.dot(ufl.TrialFunction(V), ufl.TestFunction(V)) * ufl.dx), [])
+    Mp = fem_petsc.create_matrix(fem.form(ufl.dot(ufl.TrialFunction(V), ufl.TestFunction(V)) * ufl.dx))
+    fem_utils.assemble_matrix_into(Mp, fem.form(ufl.dot(ufl.TrialFunction(V), ufl.TestFunction(V)) * ufl.dx), [])
     assert Mm.norm(PETSc.NormType.FROBENIUS) == pytest.approx(Mp.norm(PETSc.NormType.FROBENIUS), rel=1e-12)
     # and the interpolant converges to the field (L2 error falls with h) on distorted meshes
     errs = []
@@ -95,14 +97,14 @@ def test_mixed_rtcf_matches_plain_rtcf(comm):
         qr.interpolate(_field)
         x = ufl.SpatialCoordinate(d)
         exact = ufl.as_vector([ufl.sin(2 * x[0]) + x[1] ** 2, ufl.cos(3 * x[1]) * x[0] + 0.3])
-        errs.append(np.sqrt(compat.assemble_scalar(fem.form(ufl.dot(qr - exact, qr - exact) * ufl.dx), comm)))
+        errs.append(np.sqrt(fem_utils.assemble_scalar(fem.form(ufl.dot(qr - exact, qr - exact) * ufl.dx), comm)))
     rates = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
     assert (rates > 0.8).all(), rates
 
 
 def _hessian(problem):
-    A = compat.create_matrix(problem.forms.hessian)
-    compat.assemble_matrix_into(A, problem.forms.hessian, problem.bcs)
+    A = fem_petsc.create_matrix(problem.forms.hessian)
+    fem_utils.assemble_matrix_into(A, problem.forms.hessian, problem.bcs)
     return A
 
 
@@ -124,7 +126,7 @@ def test_hessian_is_symmetric_at_a_general_state(comm):
 
 
 def _residual(problem):
-    b = compat.create_vector(problem.forms.residual)
+    b = fem_petsc.create_vector(problem.forms.residual)
     x = compat.function_vector(problem.w)
     compat.assemble_residual_into(b, problem.forms.residual, problem.forms.hessian, problem.bcs, x)
     return b
@@ -132,7 +134,7 @@ def _residual(problem):
 
 def _block_norms(problem, b):
     W = problem.W
-    n_owned = compat.owned_size(W)
+    n_owned = fem_utils.owned_size(W)
     arr = b.array
     u_mask = problem.u_dofs[problem.u_dofs < n_owned]
     q_mask = problem.q_dofs[problem.q_dofs < n_owned]
@@ -179,7 +181,7 @@ def test_residual_lifting_vanishes_once_the_iterate_meets_the_dirichlet_values(c
     def residuals():
         out = []
         for lifting in (True, False):
-            b = compat.create_vector(p.forms.residual)
+            b = fem_petsc.create_vector(p.forms.residual)
             compat.assemble_residual_into(b, p.forms.residual, p.forms.hessian, p.bcs, x, lifting=lifting)
             out.append(b)
         return out
@@ -187,7 +189,7 @@ def test_residual_lifting_vanishes_once_the_iterate_meets_the_dirichlet_values(c
     with_lift, without = residuals()  # x misses the (zero) Dirichlet values
     without.axpy(-1.0, with_lift)
     assert without.norm() > 1e-3 * with_lift.norm()
-    compat.set_dirichlet_values(x, p.bcs)
+    fem_petsc.set_bc(x, p.bcs)
     x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
     with_lift, without = residuals()
     without.axpy(-1.0, with_lift)

@@ -12,7 +12,7 @@ from cases import swelling_case
 from conftest import read_csv, run_to_end, small_bilayer
 from dolfinx import fem
 
-from app import compat, config, factory
+from app import config, factory, fem_utils
 from app.model import history, loading, material
 from app.model.hydrogel import HydrogelLaw
 from app.onset import criteria
@@ -81,7 +81,7 @@ class SolidUptake:
             s = ufl.det(F) * m.preswelling - 1 + m.shear_modulus / (m.penalty * m.preswelling) * (
                 m.preswelling ** (2 / 3) * lam - 1 / lam)
             self._forms[id(p)] = fem.form(s * p.dx_coupling)  # one point per cell, as the penalty
-        return {"solid_uptake_mm2": compat.assemble_scalar(self._forms[id(p)], p.comm)}
+        return {"solid_uptake_mm2": fem_utils.assemble_scalar(self._forms[id(p)], p.comm)}
 
 
 @pytest.fixture

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 import ufl
 from dolfinx import fem
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from scipy.optimize import brentq
 
-from app import compat, config
+from app import config, fem_utils
 from app.model.hydrogel import HYDROGEL, Hydrogel
 from app.model.material import LAWS, chemical_potential, first_piola, free_energy
 from app.model.theory import _undrained_pxx, constrained_layer_fluid, constrained_layer_stretch
@@ -23,10 +24,10 @@ PAPER = dict(mixing_modulus=24.2, penalty=10.0, mobility=1e-4, preswelling=1.01,
 
 def _evaluate(expr_of, mat, F_values, s_value):
     """Evaluate a UFL expression of (mat, F, s) with UFL-differentiable variables on a 1-cell mesh."""
-    domain = compat.rectangle_quads(MPI.COMM_SELF, (0, 0), (1, 1), (1, 1))
+    domain = dmesh.create_rectangle(MPI.COMM_SELF, [np.array([0, 0], float), np.array([1, 1], float)], [1, 1], cell_type=dmesh.CellType.quadrilateral)
     F = ufl.variable(ufl.as_matrix([[fem.Constant(domain, float(v)) for v in row] for row in F_values]))
     s = ufl.variable(fem.Constant(domain, float(s_value)))
-    return compat.assemble_scalar(fem.form(expr_of(mat, F, s) * ufl.dx(domain=domain)), MPI.COMM_SELF)
+    return fem_utils.assemble_scalar(fem.form(expr_of(mat, F, s) * ufl.dx(domain=domain)), MPI.COMM_SELF)
 
 
 @pytest.mark.parametrize("gamma,J0", [(0.1, 1.01), (0.8, 1.01), (0.1, 1.5), (2.0, 1.2)])

@@ -5,14 +5,14 @@ import pytest
 import ufl
 from dolfinx import fem
 
-from app import compat
+from app import fem_utils
 from app.geometry.bilayer import tagged_mesh
 from meshes import bilayer
 
 
 def _measure(tm, comm, dim_measure):
     one = fem.Constant(tm.mesh, 1.0)
-    return compat.assemble_scalar(fem.form(one * dim_measure), comm)
+    return fem_utils.assemble_scalar(fem.form(one * dim_measure), comm)
 
 
 @pytest.mark.parametrize("grading", [1.0, 1.15, 1.4])
@@ -25,7 +25,7 @@ def test_bilayer_layers_and_boundaries(comm, grading):
     assert _measure(tm, comm, dx(tm.cell_names["substrate"])) == pytest.approx(L * H, rel=1e-12)
     for name, length in (("top", L), ("bottom", L), ("left", H + w), ("right", H + w)):
         assert _measure(tm, comm, ds(tm.facet_names[name])) == pytest.approx(length, rel=1e-12)
-    assert compat.num_global_cells(tm.mesh) == 20 * (3 + tm.info["substrate_layers"])
+    assert fem_utils.num_global_cells(tm.mesh) == 20 * (3 + tm.info["substrate_layers"])
     assert tm.info["film_element_aspect"] == pytest.approx(0.02 / (w / 3))
 
 

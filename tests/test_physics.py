@@ -9,7 +9,7 @@ from dolfinx import fem
 from mpi4py import MPI
 from scipy.optimize import brentq
 
-from app import config
+from app import config, fem_utils
 from app.model.hydrogel import Hydrogel
 from app.model.theory import constrained_layer_stretch
 
@@ -30,7 +30,7 @@ def test_fluid_taken_up_by_the_solid_equals_the_inflow_through_the_top(comm):
     measured wrongly, if Newton stops short, or if the mechanics does not follow the fluid."""
     import ufl
 
-    from app import compat, factory
+    from app import factory
 
     cfg = small_bilayer(**{"time.end": 1.2})
     p = factory.problem(cfg, comm)
@@ -43,13 +43,13 @@ def test_fluid_taken_up_by_the_solid_equals_the_inflow_through_the_top(comm):
     uptake_form = fem.form(s_of_u * p.dx_coupling)  # one point per cell, as the penalty
     ux = p.u_dofs[0::2]
     rows = [st.initial_record()]
-    v_u0 = compat.assemble_scalar(uptake_form, comm)
+    v_u0 = fem_utils.assemble_scalar(uptake_form, comm)
     # the reference state is stress-free: s(1) = s0 in every cell (measured 7e-15 relative)
     assert v_u0 == pytest.approx(rows[0].fluid_volume, rel=2e-14)
     taken_up, max_ux = [], 0.0
     while not st.done():
         rows.append(st.advance())
-        taken_up.append(compat.assemble_scalar(uptake_form, comm) - v_u0)
+        taken_up.append(fem_utils.assemble_scalar(uptake_form, comm) - v_u0)
         max_ux = max(max_ux, comm.allreduce(float(np.abs(p.state.x.array[ux]).max(initial=0.0)), op=MPI.MAX))
     st.destroy()
     inflow = np.array([r.inflow for r in rows[1:]])

@@ -18,7 +18,7 @@ from conftest import read_json, write_on_rank0
 from dolfinx import fem
 from mpi4py import MPI
 
-from app import compat, config
+from app import compat, config, fem_utils
 from app.factory import layer_materials
 from app.model.theory import film_wrinkling_wavelength
 from app.onset.contact import _segments_cross
@@ -473,10 +473,8 @@ def _midpoint_jacobians(problem, u: np.ndarray):
     """Per owned cell, from the deformed corner positions alone: (det F at the midpoint as a function of a
     scale c of the displacement, as the coefficients of cross(D1(c), D2(c)) / cross(d1, d2) = a + b c + q c^2
     with D the deformed diagonals of the bilinear quad, d the reference ones), and the midpoints."""
-    from app import compat
-
     domain = problem.domain
-    nodes = compat.cell_geometry_nodes(domain)[: compat.num_owned_cells(domain)]
+    nodes = fem_utils.cell_geometry_nodes(domain)[: fem_utils.num_owned_cells(domain)]
     X = domain.geometry.x[:, :2]
     dof_xy = problem.V_u.tabulate_dof_coordinates()[:, :2]
     key = {tuple(np.round(p, 12)): i for i, p in enumerate(dof_xy)}
@@ -644,11 +642,11 @@ def test_drained_switch_leaves_the_chemical_potential_unperturbed(monkeypatch, t
     direction = fem.Function(p.W)
     V0 = compat.scalar_space(p.domain, "DG", 0)
     dmu = fem.Function(V0)
-    n_owned = compat.num_owned_cells(p.domain)
+    n_owned = fem_utils.num_owned_cells(p.domain)
 
     def norm_of_delta_mu(d: np.ndarray) -> float:
         direction.x.array[:] = d  # the state's Q_n grew by d's flux part: as a step's dQ, s = s_n - div dQ
-        compat.interpolate(dmu, compat.expression(ufl.derivative(p.pot.mu, p.w, direction), V0))
+        dmu.interpolate(compat.expression(ufl.derivative(p.pot.mu, p.w, direction), V0))
         return float(np.sqrt(comm.allreduce(float(np.sum(dmu.x.array[:n_owned] ** 2)))))
 
     undrained = delta.copy()

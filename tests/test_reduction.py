@@ -24,7 +24,7 @@ from conftest import EXE, child_env, child_jobs, long_physics, on_rank0, rank_lo
 from dolfinx import fem
 from scipy.optimize import brentq
 
-from app import compat, config, factory
+from app import compat, config, factory, fem_utils
 from app.factory import layer_materials
 from app.model import theory
 from app.model.hydrogel import HYDROGEL
@@ -69,7 +69,7 @@ def test_steady_state_is_the_laterally_constrained_equilibrium():
     lam, s = fem.Function(V0), fem.Function(V0)
     lam.interpolate(compat.expression(1.0 + u.dx(0), V0))
     s.interpolate(compat.expression(m.mat.s0 - m.div(q), V0))
-    mid = compat.dof_coordinates(V0)
+    mid = fem_utils.dof_coordinates(V0)
     growth = 0.0
     for lay in sec.layers:
         mat = sec.materials[lay.material]

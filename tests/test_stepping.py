@@ -19,7 +19,7 @@ from conftest import run_to_end, small_bilayer
 from dolfinx import fem
 from mpi4py import MPI
 
-from app import cli, compat, config, factory
+from app import cli, compat, config, factory, fem_utils
 from app.solvers.step_control import CUTBACK, GROW_MAX, SAFETY, SHRINK_MIN
 from app.workflows.run import simulate
 
@@ -40,9 +40,9 @@ def cell_fluid_content(p) -> np.ndarray:
     V0 = compat.scalar_space(p.domain, "DG", 0)
     v0 = ufl.TestFunction(V0)
     _, Q = ufl.split(p.state)
-    num = compat.assemble_vector(fem.form((p.mat.s0 - ufl.div(Q)) * v0 * ufl.dx))
-    area = compat.assemble_vector(fem.form(v0 * ufl.dx))
-    n = compat.num_owned_cells(p.domain)
+    num = fem_utils.assemble_vector(fem.form((p.mat.s0 - ufl.div(Q)) * v0 * ufl.dx))
+    area = fem_utils.assemble_vector(fem.form(v0 * ufl.dx))
+    n = fem_utils.num_owned_cells(p.domain)
     out = (num.array / area.array)[:n].copy()
     num.destroy()
     area.destroy()

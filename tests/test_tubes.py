@@ -12,7 +12,7 @@ from conftest import time_stepper
 from dolfinx import fem
 from scipy.spatial import cKDTree
 
-from app import compat, config, factory, geometry
+from app import config, factory, fem_utils, geometry
 from app.geometry import bilayer, msh, tube
 from app.model.surface import boundary_displacement
 from app.workflows.run import simulate
@@ -23,8 +23,8 @@ def _areas(tm, comm):
     dx = ufl.Measure("dx", domain=tm.mesh, subdomain_data=tm.cell_tags)
     ds = ufl.Measure("ds", domain=tm.mesh, subdomain_data=tm.facet_tags)
     one = fem.Constant(tm.mesh, 1.0)
-    A = {n: compat.assemble_scalar(fem.form(one * dx(t)), comm) for n, t in tm.cell_names.items()}
-    A.update({n: compat.assemble_scalar(fem.form(one * ds(t)), comm) for n, t in tm.facet_names.items()})
+    A = {n: fem_utils.assemble_scalar(fem.form(one * dx(t)), comm) for n, t in tm.cell_names.items()}
+    A.update({n: fem_utils.assemble_scalar(fem.form(one * ds(t)), comm) for n, t in tm.facet_names.items()})
     return A
 
 
@@ -70,11 +70,11 @@ def _uptake_mismatch(cfg, comm) -> np.ndarray:
     st = time_stepper(p, cfg)
     u_n, _ = ufl.split(p.state)
     form = fem.form((ufl.det(ufl.Identity(2) + ufl.grad(u_n)) * p.mat.preswelling - 1) * p.dx_coupling)
-    v0 = compat.assemble_scalar(form, comm)
+    v0 = fem_utils.assemble_scalar(form, comm)
     out = []
     while not st.done():
         rec = st.advance()
-        out.append((compat.assemble_scalar(form, comm) - v0 - rec.inflow) / rec.inflow)
+        out.append((fem_utils.assemble_scalar(form, comm) - v0 - rec.inflow) / rec.inflow)
     st.destroy()
     return np.array(out)
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
+from app import fem_utils
 from app.registry import Registry
 from app.schema import ConfigError, Key, gt, key, one_of
 
@@ -85,13 +86,11 @@ class GeometrySetup:
     def material_under(self, role: str, comm) -> str:
         """The material of most cells next to the facets of ``role``: the surface chemical potential ramp
         starts at its mu0. Without such cells: "film", or (no layer called so) the first material by name."""
-        from app import compat
-
         domain = self.tm.mesh
         tdim = domain.topology.dim
         domain.topology.create_connectivity(tdim - 1, tdim)
         f2c = domain.topology.connectivity(tdim - 1, tdim)
-        n_owned = compat.num_owned_cells(domain)
+        n_owned = fem_utils.num_owned_cells(domain)
         group_of_cell = {}
         for group in self.layers:
             for c in self.tm.cells(group):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from dolfinx import fem
 
-from app import compat
+from app import compat, fem_utils
 
 
 def lagrange1_dof_nodes(V) -> np.ndarray:
@@ -18,16 +18,16 @@ def lagrange1_dof_nodes(V) -> np.ndarray:
     Both dofmaps list a cell's entries in the reference cell's vertex order, so the k-th dof of a cell
     sits on the cell's k-th geometry node; checked here against the dof coordinates."""
     domain = V.mesh
-    n = compat.num_local_cells(domain)
+    n = fem_utils.num_local_cells(domain)
     dofs = compat.cells_by_row(V.dofmap.list, n)
-    nodes = compat.cell_geometry_nodes(domain)
+    nodes = fem_utils.cell_geometry_nodes(domain)
     if dofs.shape != nodes.shape:
         raise RuntimeError(f"{dofs.shape[1]} dofs per cell but {nodes.shape[1]} geometry nodes: not P1 on a P1 mesh")
     size = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
     out = np.full(size, -1, dtype=np.int64)
     out[dofs.ravel()] = nodes.ravel()
     X = V.tabulate_dof_coordinates()[:, :domain.geometry.dim]
-    if (out < 0).any() or not np.allclose(X, compat.node_coordinates(domain)[out], rtol=0.0,
+    if (out < 0).any() or not np.allclose(X, fem_utils.node_coordinates(domain)[out], rtol=0.0,
                                           atol=1e-12 * max(1.0, float(np.abs(X).max(initial=0.0)))):
         raise RuntimeError("P1 dofs and geometry nodes do not coincide")
     return out
@@ -39,7 +39,7 @@ def facet_of_dofs(V) -> np.ndarray:
     domain = V.mesh
     tdim = domain.topology.dim
     domain.topology.create_connectivity(tdim, tdim - 1)
-    n = compat.num_local_cells(domain)
+    n = fem_utils.num_local_cells(domain)
     c2f = np.asarray(domain.topology.connectivity(tdim, tdim - 1).array, dtype=np.int64).reshape(n, -1)
     dofs = compat.cells_by_row(V.dofmap.list, n)
     size = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
@@ -76,7 +76,7 @@ def facet_nodes(domain) -> np.ndarray:
     domain.topology.create_connectivity(tdim - 1, 0)
     domain.topology.create_connectivity(tdim, 0)
     f2v = np.asarray(domain.topology.connectivity(tdim - 1, 0).array, dtype=np.int64).reshape(-1, 2 ** (tdim - 1))
-    c2v = np.asarray(domain.topology.connectivity(tdim, 0).array, dtype=np.int64).reshape(compat.num_local_cells(domain), -1)
+    c2v = np.asarray(domain.topology.connectivity(tdim, 0).array, dtype=np.int64).reshape(fem_utils.num_local_cells(domain), -1)
     v2g = np.full(domain.topology.index_map(0).size_local + domain.topology.index_map(0).num_ghosts, -1, np.int64)
-    v2g[c2v] = compat.cell_geometry_nodes(domain)[:, : c2v.shape[1]]  # a first-order cell's nodes are its vertices
+    v2g[c2v] = fem_utils.cell_geometry_nodes(domain)[:, : c2v.shape[1]]  # a first-order cell's nodes are its vertices
     return v2g[f2v]

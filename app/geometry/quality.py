@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
-from app import compat
+from app import fem_utils
 
 
 def scaled_jacobians(domain) -> np.ndarray:
     """Per owned cell, the minimum over its corners of sin(angle between the two edges at the corner)
     (the scaled Jacobian: 1 for rectangles, -> 0 for degenerate cells, < 0 for inverted ones)."""
     x = domain.geometry.x[:, :2]
-    n = compat.num_owned_cells(domain)
-    cells = compat.cell_geometry_nodes(domain)[:n]
+    n = fem_utils.num_owned_cells(domain)
+    cells = fem_utils.cell_geometry_nodes(domain)[:n]
     if n == 0:
         return np.empty(0)
     # dolfinx quadrilateral node order is tensor-product: (0,1,3,2) walks the boundary

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import gmsh
 import numpy as np
 
-from app import compat
+from app import compat, fem_utils
 
 
 @dataclass
@@ -29,10 +29,10 @@ class TaggedMesh:
     info: dict = field(default_factory=dict)
 
     def cells(self, name: str) -> np.ndarray:
-        return compat.cells_with_tag(self.cell_tags, self.cell_names[name])
+        return self.cell_tags.indices[self.cell_tags.values == self.cell_names[name]]
 
     def facets(self, name: str) -> np.ndarray:
-        return compat.facets_with_tag(self.facet_tags, self.facet_names[name])
+        return self.facet_tags.indices[self.facet_tags.values == self.facet_names[name]]
 
 
 @contextlib.contextmanager
@@ -104,7 +104,7 @@ def boundary_points(tm: TaggedMesh, groups: list[str]) -> np.ndarray:
     domain.topology.create_connectivity(fdim, 0)
     f2v = domain.topology.connectivity(fdim, 0)
     x = domain.geometry.x[:, :2]
-    v_to_geom = compat.vertex_to_geometry(domain)
+    v_to_geom = fem_utils.vertex_to_geometry(domain)
     segs = []
     for g in groups:
         for f in tm.facets(g):
@@ -124,7 +124,7 @@ def facet_nodes(tm: TaggedMesh, groups: list[str]) -> np.ndarray:
     fdim = domain.topology.dim - 1
     domain.topology.create_connectivity(fdim, 0)
     f2v = domain.topology.connectivity(fdim, 0)
-    v_to_geom = compat.vertex_to_geometry(domain)
+    v_to_geom = fem_utils.vertex_to_geometry(domain)
     gdim = domain.geometry.dim
     nodes = [v_to_geom[f2v.links(f)] for g in groups for f in tm.facets(g)]
     local = domain.geometry.x[np.unique(np.concatenate(nodes)), :gdim] if nodes else np.zeros((0, gdim))

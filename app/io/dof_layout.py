@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from app import compat
+from app import fem_utils
 from app.geometry import dofmaps
 
 KEY_BASE = 1 << 31  # a facet's key: lo * KEY_BASE + hi (input node indices < 2^31)
@@ -34,12 +34,12 @@ class DofLayout:
 
     def _build(self, problem):
         p = problem
-        orig = compat.original_node_indices(p.domain)
+        orig = np.asarray(p.domain.geometry.input_global_indices, dtype=np.int64)
         self.dim = p.domain.geometry.dim
         limit = KEY_BASE if self.dim == 2 else KEY_BASE_3D
         if orig.size and orig.max() >= limit:
             raise RuntimeError(f"input node index {orig.max()} >= {limit}: facet keys would overflow")
-        X = compat.node_coordinates(p.domain)
+        X = fem_utils.node_coordinates(p.domain)
         nodes = dofmaps.lagrange1_dof_nodes(p.V_u)  # per local displacement block
         self.u_key, self.u_x = orig[nodes], X[nodes]
         ends = dofmaps.facet_nodes(p.domain)[dofmaps.facet_of_dofs(p.V_q)]  # (n_q, 2 or 4) geometry nodes

@@ -20,7 +20,7 @@ import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 
-from app import compat, config, timing
+from app import compat, config, fem_utils, timing
 from app.io import writes
 from app.io.writes import ResultWriteError
 from app.io.xdmf import FieldSeries, ballast_path
@@ -208,7 +208,7 @@ class ResultWriter:
 
             def fill(target, state=problem.state, contact=problem.contact):
                 contact.traction_into(on_u, state.x.array)
-                compat.interpolate(target, on_u)
+                target.interpolate(on_u)
 
             self._fields.append((f, _ComputedField(fill)))
 
@@ -223,7 +223,7 @@ class ResultWriter:
                 if isinstance(expr, _ComputedField):  # a field that is not a UFL expression (the contact traction)
                     expr.fill(f)
                 else:
-                    compat.interpolate(f, expr)
+                    f.interpolate(expr)
             try:
                 self._xdmf.write([f for f, _ in self._fields], t)
             except ResultWriteError as err:
@@ -383,7 +383,7 @@ def _gather_cells(problem, base: np.ndarray, mode: np.ndarray):
     """On rank 0: (vertex coordinates, base displacement, mode) per owned cell, polygon-ordered."""
     V = problem.V_u
     X = V.tabulate_dof_coordinates()[:, :2]
-    n_cells = compat.num_owned_cells(problem.domain)
+    n_cells = fem_utils.num_owned_cells(problem.domain)
     cells = np.array([V.dofmap.cell_dofs(c) for c in range(n_cells)], dtype=np.int64).reshape(n_cells, -1)
     cells = cells[:, [0, 1, 3, 2]]  # tensor-product vertex order -> polygon order
     layer = np.zeros(n_cells, dtype=np.int32)

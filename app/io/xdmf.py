@@ -13,6 +13,8 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from dolfinx.io import XDMFFile
+
 from app.io import writes
 
 
@@ -63,6 +65,23 @@ def rearrange(path: str | Path, name: str) -> int:
     return len(steps)
 
 
+def mesh_bytes(domain) -> int:
+    """About the bytes XDMFFile.write_mesh puts into the .h5: node coordinates (3 x float64) and the
+    cells' node lists (int64)."""
+    nodes = domain.geometry.index_map().size_global
+    tdim = domain.topology.dim
+    cells = domain.topology.index_map(tdim).size_global
+    return 8 * (3 * nodes + domain.ufl_cell().num_vertices() * cells)
+
+
+def function_bytes(f) -> int:
+    """About the bytes XDMFFile.write_function puts into the .h5 for ``f``: its global values as float64,
+    a 2D vector padded to 3 components."""
+    im = f.function_space.dofmap.index_map
+    bs = f.function_space.dofmap.index_map_bs
+    return 8 * im.size_global * (3 if bs == 2 else bs)
+
+
 def ballast_path(path: str | Path) -> Path:
     """The hidden file that keeps space aside for the close of the XDMF file ``path`` while it is open."""
     path = Path(path)
@@ -82,8 +101,6 @@ class FieldSeries:
     BALLAST = 64 * 1024  # kept aside for the close, which writes HDF5's last metadata (measured: 4 kB)
 
     def __init__(self, comm, path: str | Path, domain, name: str):
-        from app import compat
-
         self.comm, self.path, self.name = comm, Path(path), name
         self.h5 = self.path.with_suffix(".h5")
         self.ballast = ballast_path(self.path)
@@ -91,10 +108,10 @@ class FieldSeries:
         self._grown = 0  # rank 0: the .h5's growth in the last write (a measured size for the next)
 
         def create():
-            self._file = compat.xdmf_writer(comm, str(self.path))
+            self._file = XDMFFile(comm, str(self.path), "w")
 
         try:
-            self._collective([create, lambda: self._file.write_mesh(domain)], compat.xdmf_mesh_bytes(domain))
+            self._collective([create, lambda: self._file.write_mesh(domain)], mesh_bytes(domain))
         except Exception:
 
             writes.release(comm, self.ballast)
@@ -148,13 +165,11 @@ class FieldSeries:
         writes.release(self.comm, self.ballast)
 
     def write(self, functions, t: float) -> None:
-        from app import compat
-
         if self._file is None:
             return
         functions = list(functions)
         self._collective([lambda f=f: self._file.write_function(f, t) for f in functions],
-                         sum(compat.xdmf_function_bytes(f) for f in functions))
+                         sum(function_bytes(f) for f in functions))
         self._rearrange()
 
     def _rearrange(self) -> None:

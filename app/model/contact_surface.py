@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from dolfinx import fem
 
-from app import compat
+from app import fem_utils
 
 # roles of the surface that can touch itself: every boundary that holds no displacement component
 CONTACT_ROLES = ("permeable", "impermeable", "free")
@@ -103,8 +103,8 @@ class GatheredSurface:
         self.dofs = np.asarray(dofs, np.int64).reshape(-1, dim)
         self.facets = facets
         # the owned surface dofs of this rank: where the current displacement is read
-        n_owned = compat.owned_size(p.W)
-        gdofs = compat.global_indices(p.W, p.u_dofs)
+        n_owned = fem_utils.owned_size(p.W)
+        gdofs = fem_utils.global_indices(p.W, p.u_dofs)
         local = {int(g): int(i) for i, g in zip(p.u_dofs, gdofs) if i < n_owned}
         flat = self.dofs.reshape(-1)
         self._mine = np.array([k for k, g in enumerate(flat) if int(g) in local], np.int64)
@@ -127,11 +127,11 @@ class GatheredSurface:
         f2c = domain.topology.connectivity(fdim, fdim + 1)
         f2v, c2v = domain.topology.connectivity(fdim, 0), domain.topology.connectivity(fdim + 1, 0)
         points = V.tabulate_dof_coordinates()[:, :dim]
-        gdofs = compat.global_indices(p.W, p.u_dofs)  # global W dof of each u dof (dim blk + c)
+        gdofs = fem_utils.global_indices(p.W, p.u_dofs)  # global W dof of each u dof (dim blk + c)
         cells = np.array([f2c.links(f)[0] for f in facets], np.int32)
         if dim == 2:
-            mids = compat.facet_midpoints(domain, facets) if len(facets) else np.empty((0, 2))
-            cmids = compat.cell_midpoints(domain, cells) if len(cells) else np.empty((0, 2))
+            mids = fem_utils.facet_midpoints(domain, facets) if len(facets) else np.empty((0, 2))
+            cmids = fem_utils.cell_midpoints(domain, cells) if len(cells) else np.empty((0, 2))
         mine = []
         for k, (f, c) in enumerate(zip(facets, cells)):
             # a P1/Q1 cell's dofs follow its vertices: the facet's vertices' places in the cell give its dofs
@@ -185,7 +185,7 @@ class GatheredSurface:
         space."""
         f.x.array[:] = 0.0
         f.x.array[self._mine_in_u] = self.traction(owned_values).reshape(-1)[self._mine]
-        compat.scatter_forward(f)
+        f.x.scatter_forward()
 
     def entries_in(self, space, V, u_dofs) -> np.ndarray:
         """Global dof in ``space`` of each surface entry (dim n,), for a mixed space whose displacement part,
@@ -196,12 +196,12 @@ class GatheredSurface:
         number = fem.Function(p.V_u)
         number.x.array[:] = -1.0
         number.x.array[self._mine_in_u] = self._mine.astype(float)
-        compat.scatter_forward(number)
+        number.x.scatter_forward()
         there = fem.Function(V)
-        compat.interpolate(there, number)
-        values = np.rint(there.x.array[:compat.owned_size(V)]).astype(np.int64)
+        there.interpolate(number)
+        values = np.rint(there.x.array[:fem_utils.owned_size(V)]).astype(np.int64)
         local = np.flatnonzero(values >= 0)
-        glob = compat.global_indices(space, np.asarray(u_dofs)[local])
+        glob = fem_utils.global_indices(space, np.asarray(u_dofs)[local])
         out = np.full(self.dim * self.size, -1, np.int64)
         for k, g in p.comm.allgather((values[local], glob)):
             out[k] = g

@@ -44,8 +44,9 @@ from __future__ import annotations
 import numpy as np
 import ufl
 from dolfinx import fem
+from petsc4py import PETSc
 
-from app import compat
+from app import compat, fem_utils
 from app.model.kinematics import deformation_gradient
 from app.model.operators import displacement_in_problem_space
 
@@ -91,7 +92,7 @@ class FrozenFluid:
     def value(self) -> float:
         p = self.problem
         p.state.x.array[:] = p.w.x.array  # no fluid moves: Q stays 0, the state is w
-        mirror = 0.0 if self._mirror is None else compat.assemble_scalar(self._mirror, p.comm)
+        mirror = 0.0 if self._mirror is None else fem_utils.assemble_scalar(self._mirror, p.comm)
         return p.stored_energy() + mirror
 
     def growth(self) -> float:
@@ -120,7 +121,7 @@ class DrainedEquilibrium:
         self.fluid = fluid
         self.space = compat.mixed_displacement_content_space(p.domain)
         self.w = fem.Function(self.space)  # (u, c): the stress-free reference state at c = 0
-        self.mu_bar = fem.Constant(p.domain, compat.ScalarType(p.loading.mu_bar(0.0)))
+        self.mu_bar = fem.Constant(p.domain, PETSc.ScalarType(p.loading.mu_bar(0.0)))
         u, c = ufl.split(self.w)
         bulk, constraint = p.mat.law.free_energy(deformation_gradient(u), p.mat.s0 + c, p.mat)
         G = (bulk - self.mu_bar * c) * p.dx + constraint * p.dx_coupling
@@ -132,18 +133,18 @@ class DrainedEquilibrium:
         self.hessian = fem.form(ufl.derivative(residual, self.w, dv))
         self.bcs = p.fixed_displacement_conditions(self.space.sub(0))
         self.displacement = self.space.sub(0)
-        self._V_u, self._u_dofs = compat.collapse(self.space.sub(0))
+        self._V_u, self._u_dofs = fem_utils.collapse(self.space.sub(0))
         self.kept, self._content = [], None
         if fluid == "undrained":  # every cell's content held at the flat state's
             bc, self._content = compat.dirichlet_function_on_cells(self.space.sub(1), p.domain)
             self.kept = [bc]
-            _, self._c_dofs = compat.collapse(self.space.sub(1))
+            _, self._c_dofs = fem_utils.collapse(self.space.sub(1))
 
     def set_load(self, t: float) -> None:
         self.mu_bar.value = self.problem.loading.mu_bar(t)
 
     def value(self) -> float:
-        return compat.assemble_scalar(self.energy, self.problem.comm)
+        return fem_utils.assemble_scalar(self.energy, self.problem.comm)
 
     def growth(self) -> float:
         """The problem's growth measure of the displacement in ``w``."""
@@ -169,7 +170,7 @@ class HeldContent(DrainedEquilibrium):
         self.fluid = "transient"
         self.bcs, self.kept = self.bcs + self.kept, []  # the flat state holds its content too
         self.content = content
-        V_c, _ = compat.collapse(self.space.sub(1))
+        V_c, _ = fem_utils.collapse(self.space.sub(1))
         self._y, self._w = _cell_quadrature(problem.domain, V_c, self.GAUSS)
 
     def set_load(self, t: float) -> None:
@@ -196,7 +197,7 @@ def _cell_quadrature(domain, V0, n: int) -> tuple[np.ndarray, np.ndarray]:
     g, gw = np.polynomial.legendre.leggauss(n)
     xi, eta = np.meshgrid(0.5 * (g + 1.0), 0.5 * (g + 1.0), indexing="ij")
     xi, eta, wts = xi.ravel(), eta.ravel(), np.outer(gw, gw).ravel() / 4.0
-    nodes = compat.node_coordinates(domain)[compat.cell_geometry_nodes(domain)[:, :4]]  # (cells, 4, 2)
+    nodes = fem_utils.node_coordinates(domain)[fem_utils.cell_geometry_nodes(domain)[:, :4]]  # (cells, 4, 2)
     # dolfinx's quadrilateral: vertices at (0, 0), (1, 0), (0, 1), (1, 1) of the reference square
     shape = np.stack([(1 - xi) * (1 - eta), xi * (1 - eta), (1 - xi) * eta, xi * eta])  # (4, points)
     d_xi = np.stack([-(1 - eta), 1 - eta, -eta, eta])
@@ -205,7 +206,7 @@ def _cell_quadrature(domain, V0, n: int) -> tuple[np.ndarray, np.ndarray]:
     je = np.einsum("vp,cvk->cpk", d_eta, nodes)
     det = np.abs(jx[..., 0] * je[..., 1] - jx[..., 1] * je[..., 0]) * wts
     y = np.einsum("vp,cv->cp", shape, nodes[..., 1])
-    dofs = compat.cell_dofs(V0)[:, 0]  # the dof of each cell, in the order of the geometry's cells
+    dofs = fem_utils.cell_dofs(V0)[:, 0]  # the dof of each cell, in the order of the geometry's cells
     imap = V0.dofmap.index_map
     out_y = np.empty((imap.size_local + imap.num_ghosts, len(wts)))
     out_w = np.empty_like(out_y)

@@ -8,7 +8,7 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
-from app import compat
+from app import fem_utils
 from app.model.shapes import around_profile
 from app.model.shapes3d import trapezoid_weights
 from app.model.surface import boundary_displacement
@@ -33,7 +33,7 @@ class MeanNormal(GrowthMeasure):
     def bind(self, problem):
         u_n, _ = ufl.split(problem.state)
         form = fem.form(ufl.dot(u_n, ufl.FacetNormal(problem.domain)) * problem.ds_permeable)
-        return lambda: compat.assemble_scalar(form, problem.comm) / problem.surface_length
+        return lambda: fem_utils.assemble_scalar(form, problem.comm) / problem.surface_length
 
 
 class MeanRadial(GrowthMeasure):

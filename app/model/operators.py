@@ -22,8 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 import ufl
 from dolfinx import fem
+from petsc4py import PETSc
 
-from app import compat
+from app import compat, fem_utils
 from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.potential import build
 
@@ -68,8 +69,8 @@ def zero_increment_hessian(problem, tau: float) -> OwnHessian:
         source = getattr(p.mat, f.name)
         fields[f.name] = fem.Function(source.function_space)
         fields[f.name].x.array[:] = source.x.array
-    tau_c = fem.Constant(p.domain, compat.ScalarType(tau))
-    mu_bar = fem.Constant(p.domain, compat.ScalarType(0.0))  # does not enter K (linear in dQ)
+    tau_c = fem.Constant(p.domain, PETSc.ScalarType(tau))
+    mu_bar = fem.Constant(p.domain, PETSc.ScalarType(0.0))  # does not enter K (linear in dQ)
     pot = build(work, state, type(p.mat)(**fields), tau_c, mu_bar, p.dx, p.surface_measure, p.dx_coupling)
     return OwnHessian(fem.form(pot.hessian), work, state, tau_c, p.W, p.bcs, p.u_dofs, p.state, tau,
                       getattr(p, "contact", None))
@@ -94,8 +95,8 @@ class DrainedHessian:
         v, dv = ufl.TestFunction(self.space), ufl.TrialFunction(self.space)
         self.form = fem.form(ufl.derivative(ufl.derivative(energy, self.work, v), self.work, dv))
         self.bcs = p.fixed_displacement_conditions(self.space.sub(0))
-        self._V_u, self.u_dofs = compat.collapse(self.space.sub(0))
-        _, self.c_dofs = compat.collapse(self.space.sub(1))
+        self._V_u, self.u_dofs = fem_utils.collapse(self.space.sub(0))
+        _, self.c_dofs = fem_utils.collapse(self.space.sub(1))
         self.contact = getattr(p, "contact", None)  # the self-contact term: its Hessian at the state is added
         self.source = p.state
         # each surface entry's global dof in this space (the contact's Hessian lands there)
@@ -111,7 +112,7 @@ class DrainedHessian:
         u = fem.Function(p.V_u)
         u.x.array[:] = s[p.u_dofs]
         ud = fem.Function(self._V_u)
-        compat.interpolate(ud, u)
+        ud.interpolate(u)
         self.work.x.array[:] = 0.0
         self.work.x.array[self.u_dofs] = ud.x.array
 
@@ -127,7 +128,7 @@ def displacement_in_problem_space(problem, V_u, u_dofs: np.ndarray, values: np.n
     ud = fem.Function(V_u)
     ud.x.array[:] = values[u_dofs]
     u = fem.Function(problem.V_u)
-    compat.interpolate(u, ud)
+    u.interpolate(ud)
     out = np.zeros_like(problem.state.x.array)
     out[problem.u_dofs] = u.x.array
     return out
@@ -151,7 +152,7 @@ def cell_content_change(problem) -> CellContentChange:
     work = fem.Function(problem.W)
     _, dQ = ufl.split(work)
     form = fem.form(ufl.div(dQ) * v0 * ufl.dx)
-    area = compat.assemble_vector(fem.form(v0 * ufl.dx))
+    area = fem_utils.assemble_vector(fem.form(v0 * ufl.dx))
     cells = area.array.copy()
     area.destroy()
     return CellContentChange(form, work, cells)

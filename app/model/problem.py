@@ -14,8 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 import ufl
 from dolfinx import fem
+from petsc4py import PETSc
 
-from app import compat
+from app import compat, fem_utils
 from app.geometry import GeometrySetup
 from app.model.growth import GROWTH
 from app.model.kinematics import deformation_gradient, fluid_content
@@ -52,15 +53,15 @@ class Problem:
         self.W = compat.mixed_displacement_flux_space(domain)
         self.w = fem.Function(self.W)  # (u, dQ) of the current step
         self.state = fem.Function(self.W)  # (u_n, Q_n): converged previous state
-        self.V_u, self.u_dofs = compat.collapse(self.W.sub(0))
-        self.V_q, self.q_dofs = compat.collapse(self.W.sub(1))
+        self.V_u, self.u_dofs = fem_utils.collapse(self.W.sub(0))
+        self.V_q, self.q_dofs = fem_utils.collapse(self.W.sub(1))
 
         self.materials = materials
         self.mat = self._material_fields()
 
-        self.tau = fem.Constant(domain, compat.ScalarType(discretization.initial_step))
+        self.tau = fem.Constant(domain, PETSc.ScalarType(discretization.initial_step))
         self.loading = loading
-        self.mu_bar = fem.Constant(domain, compat.ScalarType(self.loading.mu_bar(0.0)))
+        self.mu_bar = fem.Constant(domain, PETSc.ScalarType(self.loading.mu_bar(0.0)))
 
         self.dx = ufl.Measure("dx", domain=domain, metadata={"quadrature_degree": discretization.quadrature_degree})
         self.dx_coupling = ufl.Measure("dx", domain=domain, metadata={
@@ -115,15 +116,15 @@ class Problem:
         bcs = self.fixed_displacement_conditions(self.W.sub(0), driven=False)
         driven = None
         if bc.driven is not None:
-            dbc, driven = compat.dirichlet_function_on_facets(self.W.sub(0).sub(bc.driven.component),
+            dbc, driven = fem_utils.dirichlet_zero_on_facets(self.W.sub(0).sub(bc.driven.component),
                                                               self.tm.facets(bc.driven.group), fdim)
             bcs.append(dbc)
         if bc.flux_open is not None:
-            no_flux = np.setdiff1d(compat.exterior_facets(self.domain), self.facets_of(bc.flux_open))
+            no_flux = np.setdiff1d(fem_utils.exterior_facets(self.domain), self.facets_of(bc.flux_open))
         else:  # diffusion switched off: every flux dof is zero, s stays s0
             imap = self.domain.topology.index_map(fdim)
             no_flux = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
-        bcs.append(compat.dirichlet_zero_on_facets(self.W.sub(1), no_flux.astype(np.int32), fdim)[0])
+        bcs.append(fem_utils.dirichlet_zero_on_facets(self.W.sub(1), no_flux.astype(np.int32), fdim)[0])
         return bcs, driven
 
     @property
@@ -150,10 +151,10 @@ class Problem:
         the same mesh) wherever the loading fixes a component: held, and with ``driven`` also the driven
         boundary. The stability tests of other spaces use them: which dofs are fixed, not their values."""
         bc, fdim = self._conditions, self.domain.topology.dim - 1
-        bcs = [compat.dirichlet_zero_on_facets(Wu.sub(comp), self.facets_of(groups), fdim)[0]
+        bcs = [fem_utils.dirichlet_zero_on_facets(Wu.sub(comp), self.facets_of(groups), fdim)[0]
                for comp, groups in enumerate(bc.held[:self.domain.geometry.dim]) if groups]
         if driven and bc.driven is not None:
-            bcs.append(compat.dirichlet_zero_on_facets(Wu.sub(bc.driven.component), self.tm.facets(bc.driven.group),
+            bcs.append(fem_utils.dirichlet_zero_on_facets(Wu.sub(bc.driven.component), self.tm.facets(bc.driven.group),
                                                        fdim)[0])
         return bcs
 
@@ -161,8 +162,8 @@ class Problem:
         u_n, Q_n = ufl.split(self.state)
         _, dQ = ufl.split(self.w)
         n = ufl.FacetNormal(self.domain)
-        one = fem.Constant(self.domain, compat.ScalarType(1.0))
-        self.surface_length = compat.assemble_scalar(fem.form(one * self.ds_permeable), self.comm)
+        one = fem.Constant(self.domain, PETSc.ScalarType(1.0))
+        self.surface_length = fem_utils.assemble_scalar(fem.form(one * self.ds_permeable), self.comm)
         self._fluid_form = fem.form(fluid_content(self.mat.s0, Q_n) * self.dx)
         self._influx_form = fem.form(-ufl.dot(dQ, n) * self.ds_permeable)
         # the stored energy of the converged state (the incremental potential without dissipation and load)
@@ -197,7 +198,7 @@ class Problem:
 
     def stored_energy(self) -> float:
         """Stored (free) energy of the converged state [N mm / mm depth]: psi integrated over the reference."""
-        return compat.assemble_scalar(self._stored_form, self.comm)
+        return fem_utils.assemble_scalar(self._stored_form, self.comm)
 
     def surface_shape(self, array=None) -> tuple[float, float]:
         """(amplitude [mm], wrinkle count) of the permeable surface's shape in ``array`` (default: the converged
@@ -206,14 +207,14 @@ class Problem:
 
     def fluid_volume(self) -> float:
         """Integral of the fluid content s over the reference domain [mm^2 per unit depth]."""
-        return compat.assemble_scalar(self._fluid_form, self.comm)
+        return fem_utils.assemble_scalar(self._fluid_form, self.comm)
 
     def step_influx(self) -> float:
         """Fluid volume that entered through the permeable surface in the current step."""
-        return compat.assemble_scalar(self._influx_form, self.comm)
+        return fem_utils.assemble_scalar(self._influx_form, self.comm)
 
     def dofs(self) -> int:
-        return compat.global_size(self.W)
+        return fem_utils.global_size(self.W)
 
     def cells(self) -> int:
-        return compat.num_global_cells(self.domain)
+        return fem_utils.num_global_cells(self.domain)

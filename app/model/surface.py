@@ -9,8 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from dolfinx import fem
 
-from app import compat
 from app.model import shapes3d  # noqa: F401  (registers the 3D shape measures)
 from app.model.shapes import SHAPES, SurfaceShape
 
@@ -24,7 +24,7 @@ def boundary_displacement(problem, array: np.ndarray, groups: list[str]):
     fdim = p.domain.topology.dim - 1
     d = p.domain.geometry.dim
     facets = np.unique(np.concatenate([p.tm.facets(g) for g in groups])) if groups else np.empty(0, np.int32)
-    blocks = compat.locate_dofs_on_facets(V, fdim, facets)
+    blocks = np.asarray(fem.locate_dofs_topological(V, fdim, facets), dtype=np.int32)
     n_owned = V.dofmap.index_map.size_local
     blocks = blocks[blocks < n_owned]
     coords = V.tabulate_dof_coordinates()[blocks, :d]

@@ -23,8 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 import ufl
 from dolfinx import fem
+from petsc4py import PETSc
 
-from app import compat
+from app import fem_utils
 from app.model.operators import zero_increment_hessian
 from app.model.patterns import shape_coefficient, surface_spectrum
 from app.model.surface import shape_of, surface_profile, surface_shape
@@ -52,8 +53,8 @@ class Switch:
 def typical_cell_size(problem) -> float:
     """sqrt(area / cells) of the mesh as its file has it: a .msh mesh split by mesh.refinements keeps the
     file's cell size, so the imperfection is the same on every level of a refinement study."""
-    one = fem.Constant(problem.domain, compat.ScalarType(1.0))
-    area = compat.assemble_scalar(fem.form(one * ufl.dx(domain=problem.domain)), problem.comm)
+    one = fem.Constant(problem.domain, PETSc.ScalarType(1.0))
+    area = fem_utils.assemble_scalar(fem.form(one * ufl.dx(domain=problem.domain)), problem.comm)
     return float(np.sqrt(area / problem.cells())) * 2.0 ** problem.tm.info.get("refinements", 0)
 
 
@@ -154,10 +155,10 @@ class BranchSwitcher:
         op = HessianOperator(zero_increment_hessian(p, tau), p.comm)
         try:
             op.matrix()
-            n_owned = compat.owned_size(p.W)
+            n_owned = fem_utils.owned_size(p.W)
             is_q = np.zeros(n_owned, dtype=bool)
             is_q[p.q_dofs[p.q_dofs < n_owned]] = True
-            free_q = compat.owned_index_set(p.W, np.flatnonzero(is_q & ~op.fixed()), p.comm)
+            free_q = fem_utils.owned_index_set(p.W, np.flatnonzero(is_q & ~op.fixed()), p.comm)
             z = op.A.createVecRight()
             z.array[:] = 0.0
             u_owned = p.u_dofs[p.u_dofs < n_owned]

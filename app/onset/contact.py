@@ -18,9 +18,9 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
-from app import compat
-from app.model.polyline_penalty import GAP_LIMIT, crossing_segments
+from app import compat, fem_utils
 from app.model.kinematics import deformation_gradient
+from app.model.polyline_penalty import GAP_LIMIT, crossing_segments
 from app.model.surface import boundary_displacement, shape_of
 from app.solvers.stepped_problem import ModelLimit
 
@@ -97,8 +97,8 @@ class InversionCheck:
     def __call__(self, array: np.ndarray) -> Limit | None:
         p = self.p
         self._u.x.array[:] = array[p.u_dofs]
-        compat.interpolate(self._J, self._expr)
-        n_owned = compat.num_owned_cells(p.domain)
+        self._J.interpolate(self._expr)
+        n_owned = fem_utils.num_owned_cells(p.domain)
         J = self._J.x.array[:n_owned]
         i = int(np.argmin(J)) if n_owned else -1
         local = float(J[i]) if n_owned else np.inf

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app import compat
+from app import fem_utils
 from app.model.equilibrium import equilibrium
 from app.solvers.minimizer import MinimizingNewton
 from app.solvers.newton import NewtonSolver, SolverSettings
@@ -106,14 +106,14 @@ class CreaseTrial:
         self._creased = {}  # growing: the creased states with less energy than the flat one, by load time
         fdim = p.domain.topology.dim - 1
         surface = p.facets_of(p.geo.facets_with_role("permeable"))
-        mid = compat.facet_midpoints(p.domain, surface.astype(np.int32))
+        mid = fem_utils.facet_midpoints(p.domain, surface.astype(np.int32))
         facets = surface[np.abs(mid[:, 0] - line) < length].astype(np.int32)
         if p.comm.allreduce(len(facets)) == 0:
             raise ValueError(f"no surface facet within {length:g} mm of the symmetry line x = {line:g}")
-        self.bc, self.target = compat.dirichlet_function_on_facets(sys.displacement.sub(0), facets, fdim)
-        V0, self._x_dofs = compat.collapse(sys.displacement.sub(0))
-        _, self._y_dofs = compat.collapse(sys.displacement.sub(1))  # the same nodes in the same order
-        self._points = compat.dof_points(V0)
+        self.bc, self.target = fem_utils.dirichlet_zero_on_facets(sys.displacement.sub(0), facets, fdim)
+        V0, self._x_dofs = fem_utils.collapse(sys.displacement.sub(0))
+        _, self._y_dofs = fem_utils.collapse(sys.displacement.sub(1))  # the same nodes in the same order
+        self._points = fem_utils.dof_points(V0)
         self._X = self._points[:, 0]
         # the surface's nodes: the body's top (a flat surface, as the bilayer's)
         top = p.comm.allreduce(float(self._points[:, 1].max()) if len(self._points) else -np.inf, op=_max())

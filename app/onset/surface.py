@@ -25,8 +25,9 @@ import numpy as np
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
+from petsc4py import PETSc
 
-from app import compat
+from app import compat, fem_utils
 from app.geometry import dofmaps
 from app.model.material import chemical_potential, first_piola
 from app.model.potential import fields_class
@@ -52,10 +53,10 @@ class SurfaceCheck:
         n_owned_facets = domain.topology.index_map(tdim - 1).size_local
         facets = [f for g in p.geo.facets_with_role("permeable") for f in p.tm.facets(g) if f < n_owned_facets]
         self.facets = np.array(sorted(set(int(f) for f in facets)), dtype=np.int64)
-        v2g = compat.vertex_to_geometry(domain)
-        x = compat.node_coordinates(domain)
+        v2g = fem_utils.vertex_to_geometry(domain)
+        x = fem_utils.node_coordinates(domain)
         gdim = self.dim = domain.geometry.dim
-        cell_nodes = compat.cell_geometry_nodes(domain)
+        cell_nodes = fem_utils.cell_geometry_nodes(domain)
         self.cells = np.array([f2c.links(f)[0] for f in self.facets], dtype=np.int64)
         corners = 2 ** (tdim - 1)  # a facet's vertices: 2 (a segment) or 4 (a quadrilateral, tensor-product order)
         self.vertex_nodes = np.array([v2g[f2v.links(f)] for f in self.facets], dtype=np.int64).reshape(-1, corners)
@@ -121,7 +122,7 @@ class SurfaceCheck:
         p = self.problem
         d = self.dim
         u = p.state.x.array[p.u_dofs].reshape(-1, d)
-        x = compat.node_coordinates(p.domain)
+        x = fem_utils.node_coordinates(p.domain)
         node_u = np.zeros((x.shape[0], d))
         node_u[self.node_dofs] = u
         j = self._tangents(x[self.vertex_nodes][..., :d] + node_u[self.vertex_nodes])  # current derivatives
@@ -201,9 +202,9 @@ class SurfaceState:
         n = len(materials)
         self.dim = dim
         law = materials[0].law
-        d = compat.interval_mesh(MPI.COMM_SELF, np.arange(n + 1, dtype=float))
+        d = fem_utils.interval_mesh(MPI.COMM_SELF, np.arange(n + 1, dtype=float))
         V0 = compat.scalar_space(d, "DG", 0)
-        at = np.argsort(compat.dof_coordinates(V0))  # dof of point k (cell k spans [k, k + 1])
+        at = np.argsort(fem_utils.dof_coordinates(V0))  # dof of point k (cell k spans [k, k + 1])
         fields = {}
         for name in (*law.params, "s0"):
             f = fem.Function(V0)
@@ -213,7 +214,7 @@ class SurfaceState:
         tangents = dim - 1
         self.c = [[fem.Function(V0) for _ in range(tangents)] for _ in range(dim)]  # c[row][column]
         self.at = at
-        self.mu_bar = fem.Constant(d, compat.ScalarType(0.0))
+        self.mu_bar = fem.Constant(d, PETSc.ScalarType(0.0))
         W = compat.mixed_dg0_space(d, dim + 1)
         self.w = fem.Function(W)
         parts = ufl.split(self.w)
@@ -227,8 +228,8 @@ class SurfaceState:
         self.system = LocalSystem(fem.form(res), fem.form(ufl.derivative(res, self.w, ufl.TrialFunction(W))))
         self.dofs = []
         for i in range(dim + 1):
-            Vi, dofs = compat.collapse(W.sub(i))
-            self.dofs.append(dofs[np.argsort(compat.dof_coordinates(Vi))])  # parent dof of point k
+            Vi, dofs = fem_utils.collapse(W.sub(i))
+            self.dofs.append(dofs[np.argsort(fem_utils.dof_coordinates(Vi))])  # parent dof of point k
         x = self.w.x.array
         x[self.dofs[dim - 1]] = 1.0
         x[self.dofs[dim]] = [m.s0 for m in materials]

@@ -36,8 +36,9 @@ import scipy.linalg as sla
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
+from petsc4py import PETSc
 
-from app import compat
+from app import compat, fem_utils
 
 
 class HalfSpace:
@@ -51,12 +52,12 @@ class HalfSpace:
         if crit not in ("drained", "undrained"):
             raise ValueError(f"criterion {criterion!r}")
         nodes = -depth * (np.linspace(1.0, 0.0, cells + 1) ** 2)
-        d = compat.interval_mesh(MPI.COMM_SELF, nodes)
+        d = fem_utils.interval_mesh(MPI.COMM_SELF, nodes)
         self.domain = d
-        self.F = fem.Constant(d, np.eye(dim, dtype=compat.ScalarType))
-        self.s = fem.Constant(d, compat.ScalarType(mat.s0))
+        self.F = fem.Constant(d, np.eye(dim, dtype=PETSc.ScalarType))
+        self.s = fem.Constant(d, PETSc.ScalarType(mat.s0))
         law = mat.law
-        self.params = {name: fem.Constant(d, compat.ScalarType(getattr(mat, name))) for name in law.params}
+        self.params = {name: fem.Constant(d, PETSc.ScalarType(getattr(mat, name))) for name in law.params}
         S = compat.mixed_lagrange_space(d, degree, 2 * dim)
         p = fem.Function(S)
         if dim == 2:
@@ -83,8 +84,8 @@ class HalfSpace:
         self.form = fem.form(a)
         coords, index, field = [], [], []
         for i in range(2 * dim):
-            Vi, dofs = compat.collapse(S.sub(i))
-            coords.append(compat.dof_coordinates(Vi))
+            Vi, dofs = fem_utils.collapse(S.sub(i))
+            coords.append(fem_utils.dof_coordinates(Vi))
             index.append(dofs)
             field.append(np.full(len(dofs), i))
         coords, index, field = np.concatenate(coords), np.concatenate(index), np.concatenate(field)

@@ -25,8 +25,10 @@ import numpy as np
 import scipy.linalg as sla
 import ufl
 from dolfinx import fem
+from dolfinx.fem import petsc as fem_petsc
+from petsc4py import PETSc
 
-from app import compat
+from app import compat, fem_utils
 from app.reduced.section import CRITERIA
 
 
@@ -54,7 +56,7 @@ class ModeOperator:
         self.criterion, self.shape = criterion, shape
         fields = 4 if criterion == "rate" else 2
         self.S = compat.mixed_lagrange_space(domain, degree, fields)
-        self.k = fem.Constant(domain, compat.ScalarType(0.0))
+        self.k = fem.Constant(domain, PETSc.ScalarType(0.0))
         p = fem.Function(self.S)  # the perturbation, evaluated at zero
         parts = ufl.split(p)
         r = ufl.SpatialCoordinate(domain)[0]
@@ -87,11 +89,11 @@ class ModeOperator:
         index = np.zeros(0, dtype=np.int64)
         self.field_dofs = []
         for i in range(fields):
-            Vi, dofs = compat.collapse(self.S.sub(i))
-            coords = np.concatenate([coords, compat.dof_coordinates(Vi)])
+            Vi, dofs = fem_utils.collapse(self.S.sub(i))
+            coords = np.concatenate([coords, fem_utils.dof_coordinates(Vi)])
             field_of = np.concatenate([field_of, np.full(len(dofs), i)])
             index = np.concatenate([index, dofs])
-            self.field_dofs.append((dofs, compat.dof_coordinates(Vi)))
+            self.field_dofs.append((dofs, fem_utils.dof_coordinates(Vi)))
         held = held or {}
         keep = np.ones(len(index), dtype=bool)
         for field, where in held.items():
@@ -127,9 +129,9 @@ class BandAssembler:
     def values(self) -> np.ndarray:
         """The assembled matrix's CSR values (the pattern is the same every time)."""
         if self._A is None:
-            self._A = compat.create_matrix(self.form)
-        compat.assemble_matrix_into(self._A, self.form, [])
-        indptr, indices, values = compat.matrix_csr(self._A)
+            self._A = fem_petsc.create_matrix(self.form)
+        fem_utils.assemble_matrix_into(self._A, self.form, [])
+        indptr, indices, values = self._A.getValuesCSR()
         if self._pattern is None:
             pos = np.full(len(indptr) - 1, -1, dtype=np.int64)
             pos[self.dofs] = np.arange(self.n)

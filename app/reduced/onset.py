@@ -16,8 +16,9 @@ import numpy as np
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
+from petsc4py import PETSc
 
-from app import compat
+from app import fem_utils
 from app.reduced.halfspace import HalfSpace
 from app.reduced.modes import BandedPencil, ModeOperator
 from app.reduced.transient import LayeredModel, Snapshot
@@ -47,7 +48,7 @@ class Stability:
         u, q = ufl.split(self.base)
         F0 = m.deformation(u)
         s0 = m.mat.s0 - m.div(q)
-        self.tau = fem.Constant(m.domain, compat.ScalarType(tau or 1.0))
+        self.tau = fem.Constant(m.domain, PETSc.ScalarType(tau or 1.0))
         held = {1: sec.base} if sec.shape == "planar" and not sec.clamped else {0: sec.base, 1: sec.base}
         if criterion == "rate":
             held[3 if sec.shape == "planar" else 2] = sec.base  # no normal flux through the held end
@@ -68,7 +69,7 @@ class Stability:
 
     def surface_state(self, snap: Snapshot) -> tuple[float, float, float]:
         self.set_state(snap)
-        return tuple(float(compat.assemble_scalar(f, MPI.COMM_SELF)) for f in self._surface)
+        return tuple(float(fem_utils.assemble_scalar(f, MPI.COMM_SELF)) for f in self._surface)
 
     def surface_pencil(self, snap: Snapshot) -> BandedPencil:
         """The short-wave limit at the surface's state, as a pencil constant in k (test it at k = 1)."""

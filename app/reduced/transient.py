@@ -22,8 +22,9 @@ import scipy.linalg as sla
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
+from petsc4py import PETSc
 
-from app import compat
+from app import compat, fem_utils
 from app.model.material import chemical_potential
 from app.model.potential import fields_class
 from app.reduced.section import Section
@@ -62,19 +63,19 @@ class LayeredModel:
     def __init__(self, section: Section, res: Resolution, comm=MPI.COMM_SELF):
         self.section, self.res = section, res
         self.nodes = section.nodes(res.film_cells, res.grading, res.surface_grading)
-        self.domain = compat.interval_mesh(comm, self.nodes)
+        self.domain = fem_utils.interval_mesh(comm, self.nodes)
         self.W = compat.mixed_lagrange_space(self.domain, res.degree, 2)
         self.w = fem.Function(self.W)  # (displacement, dQ of the step)
         self.state = fem.Function(self.W)  # (displacement, Q accumulated)
-        self.V0, self.v_dofs = compat.collapse(self.W.sub(0))
-        self.V1, self.q_dofs = compat.collapse(self.W.sub(1))
-        self.x_v = compat.dof_coordinates(self.V0)
-        self.x_q = compat.dof_coordinates(self.V1)
+        self.V0, self.v_dofs = fem_utils.collapse(self.W.sub(0))
+        self.V1, self.q_dofs = fem_utils.collapse(self.W.sub(1))
+        self.x_v = fem_utils.dof_coordinates(self.V0)
+        self.x_q = fem_utils.dof_coordinates(self.V1)
         self.mat = self._fields()
         d = self.domain
-        self.tau = fem.Constant(d, compat.ScalarType(res.dt_first))
-        self.mu_bar = fem.Constant(d, compat.ScalarType(section.loading.mu_bar(0.0)))
-        self.lam_x = fem.Constant(d, compat.ScalarType(1.0))
+        self.tau = fem.Constant(d, PETSc.ScalarType(res.dt_first))
+        self.mu_bar = fem.Constant(d, PETSc.ScalarType(section.loading.mu_bar(0.0)))
+        self.lam_x = fem.Constant(d, PETSc.ScalarType(1.0))
         self.dx = ufl.Measure("dx", domain=d, metadata={"quadrature_degree": 2 * res.degree + 2})
         self.r = ufl.SpatialCoordinate(d)[0]
         self.weight = self.r if section.shape == "axisymmetric" else 1.0
@@ -91,7 +92,7 @@ class LayeredModel:
         mats = self.section.materials
         law = next(iter(mats.values())).law
         V0 = compat.scalar_space(self.domain, "DG", 0)
-        mid = compat.dof_coordinates(V0)
+        mid = fem_utils.dof_coordinates(V0)
         values = {}
         for name in (*law.params, "s0"):
             f = fem.Function(V0)

@@ -4,8 +4,9 @@ matrix form assembled into NumPy arrays for SciPy's banded and sparse solvers.""
 from __future__ import annotations
 
 import numpy as np
+from dolfinx.fem import petsc as fem_petsc
 
-from app import compat
+from app import fem_utils
 
 
 class LocalSystem:
@@ -17,13 +18,13 @@ class LocalSystem:
         self._A = None
 
     def assemble(self) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        b = compat.assemble_vector(self.residual)
+        b = fem_utils.assemble_vector(self.residual)
         r = b.array.copy()
         b.destroy()
         if self._A is None:
-            self._A = compat.create_matrix(self.matrix)
-        compat.assemble_matrix_into(self._A, self.matrix, [])
-        return r, compat.matrix_csr(self._A)
+            self._A = fem_petsc.create_matrix(self.matrix)
+        fem_utils.assemble_matrix_into(self._A, self.matrix, [])
+        return r, self._A.getValuesCSR()
 
     @property
     def shape(self) -> tuple[int, int]:

@@ -29,10 +29,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from app import compat, timing
+from app import compat, fem_utils, timing
 from app.solvers.newton import NewtonResult, NewtonSolver, SolverSettings
 
 SHIFT_START = 1e-6  # first trial shift (times |diag K|) of a factorization with negative pivots
@@ -95,7 +96,7 @@ class MinimizingNewton(NewtonSolver):
             self._sync_solution(x)
             if self.extra is None:
                 return self.energy(x.array_r)
-            value = compat.assemble_scalar(self.energy_form, self.comm) + self.extra.objective(x.array_r)
+            value = fem_utils.assemble_scalar(self.energy_form, self.comm) + self.extra.objective(x.array_r)
             return value if math.isfinite(value) else OUTSIDE
 
     def admissible(self, start=None) -> bool:
@@ -105,7 +106,7 @@ class MinimizingNewton(NewtonSolver):
         surface (a prediction can carry a whole fold through the other face, to a state without a crossing).
         Same answer on every rank."""
         x = compat.function_vector(self.w)
-        compat.set_dirichlet_values(x, self.bcs)
+        fem_petsc.set_bc(x, self.bcs)
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         value = self._objective(self.snes, x)  # NaN (no contact term) or OUTSIDE outside the domain
         if not (math.isfinite(value) and value < OUTSIDE):
@@ -118,7 +119,7 @@ class MinimizingNewton(NewtonSolver):
     def energy(self, owned_values=None) -> float:
         """Pi at ``w`` (or at the owned values given, already in ``w``): the energy form plus the extra
         term (self-contact)."""
-        value = compat.assemble_scalar(self.energy_form, self.comm)
+        value = fem_utils.assemble_scalar(self.energy_form, self.comm)
         if self.extra is not None:
             value += self.extra.energy(compat.function_vector(self.w).array if owned_values is None
                                        else owned_values)
@@ -180,7 +181,7 @@ class MinimizingNewton(NewtonSolver):
         self.last = MinimizerVerdict()
         self._ttol = None  # set by this solve's first Newton iteration; a resumed round keeps it
         x = compat.function_vector(self.w)
-        compat.set_dirichlet_values(x, self.bcs)
+        fem_petsc.set_bc(x, self.bcs)
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         self.last.energy_start = self.energy(x.array)
         if not self.admissible():

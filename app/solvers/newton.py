@@ -12,10 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from app import compat, timing
+from app import compat, fem_utils, timing
 from app.solvers import mumps
 
 
@@ -44,7 +45,7 @@ def allow_new_nonzeros(A: PETSc.Mat) -> None:
 
 def held_global(bcs, space, comm) -> np.ndarray:
     """Global dofs of ``space`` under any of the Dirichlet conditions ``bcs`` (all ranks)."""
-    held = compat.global_indices(space, compat.owned_bc_dofs(bcs, space))
+    held = fem_utils.global_indices(space, fem_utils.owned_bc_dofs(bcs, space))
     return np.unique(np.concatenate(comm.allgather(held)))
 
 
@@ -113,13 +114,13 @@ class NewtonSolver:
                  extra=None):
         self.residual_form, self.hessian_form = residual, hessian
         self.bcs, self.w, self.comm = bcs, w, comm
-        self.A = compat.create_matrix(hessian)
+        self.A = fem_petsc.create_matrix(hessian)
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-        self.b = compat.create_vector(residual)
+        self.b = fem_petsc.create_vector(residual)
         self.x = self.b.duplicate()
         self._g = self.b.duplicate()  # Dirichlet values at the constrained dofs, 0 elsewhere
         self._x_prev, self._dx = self.b.duplicate(), self.b.duplicate()  # the last iterate, the update taken
-        self._bc_dofs = compat.owned_bc_dofs(bcs, w.function_space)
+        self._bc_dofs = fem_utils.owned_bc_dofs(bcs, w.function_space)
         self._lifting = True
         self.extra = extra
         self.reuse = settings.reuse and settings.linear == "direct" and extra is None
@@ -217,8 +218,8 @@ class NewtonSolver:
     def _field_index_sets(self, fields: dict):
         """Global indices of the owned displacement and flux dofs of the mixed space."""
         W = self.w.function_space
-        n_owned = compat.owned_size(W)
-        return [compat.owned_index_set(W, dofs[dofs < n_owned], self.comm) for dofs in (fields["u"], fields["q"])]
+        n_owned = fem_utils.owned_size(W)
+        return [fem_utils.owned_index_set(W, dofs[dofs < n_owned], self.comm) for dofs in (fields["u"], fields["q"])]
 
     def _sync_solution(self, x: PETSc.Vec) -> None:
         w = self.w
@@ -242,7 +243,7 @@ class NewtonSolver:
         term K (g - x); once every iterate meets them, that term is zero and skipped)."""
         g = self._g
         g.set(0.0)
-        compat.set_dirichlet_values(g, self.bcs)
+        fem_petsc.set_bc(g, self.bcs)
         idx = self._bc_dofs
         local = float(np.max(np.abs(x.array[idx] - g.array[idx]))) if idx.size else 0.0
         scale = float(np.max(np.abs(g.array[idx]))) if idx.size else 0.0
@@ -318,7 +319,7 @@ class NewtonSolver:
 
     def _assemble_jacobian(self, x, J):
         with timing.timed("assembly"):
-            compat.assemble_matrix_into(J, self.hessian_form, self.bcs)
+            fem_utils.assemble_matrix_into(J, self.hessian_form, self.bcs)
             if self.extra is not None:
                 # the term's Newton blocks where it has its own (the barrier's, projected to positive
                 # semi-definite pair by pair) until Newton is near the solution (``exact_blocks``), else its Hessian
@@ -332,7 +333,7 @@ class NewtonSolver:
         w_vec.copy(self.x)
         self._lifting = self._needs_lifting(self.x)
         if not self._lifting:
-            compat.set_dirichlet_values(self.x, self.bcs)  # exact, not just to round-off
+            fem_petsc.set_bc(self.x, self.bcs)  # exact, not just to round-off
         self._kept = self._plain = False
         self._refresh = True  # every solve starts with a factor of its own
         start = self.x.copy() if self.reuse else None

@@ -24,10 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from dolfinx import fem
+from dolfinx.fem import petsc as fem_petsc
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
-from app import compat, timing
+from app import compat, fem_utils, timing
 from app.solvers import mumps
 from app.solvers.newton import add_blocks, allow_new_nonzeros, held_global
 
@@ -45,7 +46,7 @@ class HessianOperator:
 
     def __init__(self, hessian, comm, keep: np.ndarray | None = None):
         self.k, self.comm, self.W, self.bcs = hessian, comm, hessian.space, hessian.bcs
-        self.A = compat.create_matrix(self.k.form)
+        self.A = fem_petsc.create_matrix(self.k.form)
         self.contact = getattr(hessian, "contact", None)  # an extra term's Hessian (self-contact), added
         if self.contact is not None:
             allow_new_nonzeros(self.A)
@@ -55,21 +56,21 @@ class HessianOperator:
             kept = np.zeros_like(free)
             kept[keep[keep < kept.size]] = True
             free &= kept
-        self.is_free = compat.owned_index_set(self.W, np.flatnonzero(free), self.comm)
+        self.is_free = fem_utils.owned_index_set(self.W, np.flatnonzero(free), self.comm)
         self.n_free = self.is_free.getSize()
         self.Kf = None
         self._full = self.A.createVecRight()
 
     def fixed(self) -> np.ndarray:
         """Owned dofs of the space under a Dirichlet condition."""
-        fixed = np.zeros(compat.owned_size(self.W), dtype=bool)
-        fixed[compat.owned_bc_dofs(self.bcs, self.W)] = True
+        fixed = np.zeros(fem_utils.owned_size(self.W), dtype=bool)
+        fixed[fem_utils.owned_bc_dofs(self.bcs, self.W)] = True
         return fixed
 
     def matrix(self) -> PETSc.Mat:
         """The matrix at the current converged state (free dofs only); ``A`` holds it on the whole space."""
         self.k.refresh()
-        compat.assemble_matrix_into(self.A, self.k.form, self.bcs)
+        fem_utils.assemble_matrix_into(self.A, self.k.form, self.bcs)
         if self.contact is not None:
             blocks = self.contact.entry_blocks(compat.function_vector(self.k.source).array)
             if add_blocks(self.A, blocks, self.contact.global_entries, self._held) and self.Kf is not None:
@@ -103,19 +104,19 @@ class DrainedOperator:
     def __init__(self, hessian, comm):
         self.h, self.comm = hessian, comm
         space = hessian.space
-        self.A = compat.create_matrix(hessian.form)
+        self.A = fem_petsc.create_matrix(hessian.form)
         self.contact = getattr(hessian, "contact", None)  # an extra term's Hessian (self-contact), added
         if self.contact is not None:
             allow_new_nonzeros(self.A)
             self._held = held_global(hessian.bcs, space, comm)
-        n_owned = compat.owned_size(space)
+        n_owned = fem_utils.owned_size(space)
         fixed = np.zeros(n_owned, dtype=bool)
-        fixed[compat.owned_bc_dofs(hessian.bcs, space)] = True
+        fixed[fem_utils.owned_bc_dofs(hessian.bcs, space)] = True
         is_u = np.zeros(n_owned, dtype=bool)
         is_u[hessian.u_dofs[hessian.u_dofs < n_owned]] = True
         c_dofs = hessian.c_dofs
-        self.is_free = compat.owned_index_set(space, np.flatnonzero(is_u & ~fixed), self.comm)
-        self.is_c = compat.owned_index_set(space, c_dofs[c_dofs < n_owned], self.comm)
+        self.is_free = fem_utils.owned_index_set(space, np.flatnonzero(is_u & ~fixed), self.comm)
+        self.is_c = fem_utils.owned_index_set(space, c_dofs[c_dofs < n_owned], self.comm)
         self.n_free = self.is_free.getSize()
         self.S = None
         self._sub: dict = {}  # K_uu, K_uc, K_cc (kept: same patterns every assembly)
@@ -125,7 +126,7 @@ class DrainedOperator:
     def matrix(self) -> PETSc.Mat:
         """S = K_uu - K_uc K_cc^-1 K_cu on the free displacement dofs."""
         self.h.refresh()
-        compat.assemble_matrix_into(self.A, self.h.form, self.h.bcs)
+        fem_utils.assemble_matrix_into(self.A, self.h.form, self.h.bcs)
         if self.contact is not None:
             blocks = self.contact.entry_blocks(compat.function_vector(self.h.source).array)
             if add_blocks(self.A, blocks, self.h.contact_entries, self._held):
@@ -178,7 +179,7 @@ def free_to_local(x_free: PETSc.Vec, is_free: PETSc.IS, full: PETSc.Vec, space) 
     x_free.copy(sub)
     full.restoreSubVector(is_free, sub)
     f = fem.Function(space)
-    f.x.array[:compat.owned_size(space)] = full.array
+    f.x.array[:fem_utils.owned_size(space)] = full.array
     f.x.scatter_forward()
     return f.x.array.copy()
 

@@ -18,11 +18,10 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
-from app import compat
+from app import fem_utils
 from app.solvers.newton import NewtonResult, NewtonSolver, SolverSettings
 from app.solvers.step_control import TimeSettings
-from app.solvers.stepped_problem import LostStability, Snapshot, SteppedProblem, StepFailure, StepRecord
-
+from app.solvers.stepped_problem import LostStability, Snapshot, StepFailure, SteppedProblem, StepRecord
 
 ENERGY_INCREASED = -101  # a minimizer solve whose energy ended above its initial guess's (a rejection)
 
@@ -116,7 +115,7 @@ class TimeStepper:
         a = change.work.x.array
         a[:] = 0.0
         a[s.q_dofs] = s.w.x.array[s.q_dofs] - dQ_pred
-        vec = compat.assemble_vector(change.form)
+        vec = fem_utils.assemble_vector(change.form)
         local = np.max(np.abs(vec.array / change.area)) if vec.array.size else 0.0
         vec.destroy()
         return s.comm.allreduce(float(local), op=MPI.MAX)
