@@ -27,6 +27,7 @@ from app.config_schema import (  # noqa: F401
     material_keys,
     schema,
 )
+from app.geometry.base import GeometryInput
 from app.schema import ConfigError, Key  # noqa: F401  (re-exported: config.ConfigError, config.Key)
 from app.toml_text import dumps, parse_override, parse_values, toml_value  # noqa: F401
 
@@ -38,6 +39,14 @@ def reducible(cfg: dict) -> str:
 
     return section_reducible(cfg["geometry"]["kind"], cfg["loading"]["kind"], cfg["stability"]["criterion"],
                              cfg["material"].get("layers", {}) or {})
+
+
+def geometry_input(cfg: dict) -> GeometryInput:
+    """What the config's geometry kind reads of it (:class:`app.geometry.base.GeometryInput`): its [geometry]
+    and [mesh] tables, the loading's kind and the [material.layers] names."""
+    layers = (cfg.get("material") or {}).get("layers") or {}
+    return GeometryInput(cfg["geometry"]["kind"], cfg["geometry"], cfg["mesh"],
+                         (cfg.get("loading") or {}).get("kind", "swelling"), tuple(layers))
 
 
 def read(path: str | Path) -> dict:
@@ -190,7 +199,7 @@ def validate(cfg: dict) -> None:
         raise ConfigError("mesh.refinements", f"= {cfg['mesh']['refinements']} applies to geometry.kind = {files} "
                           f"only; allowed for {kind.name!r}: 0 (refine it with mesh.element_size and "
                           "mesh.film_layers)")
-    kind.validate(cfg)
+    kind.validate(geometry_input(cfg))
     if kind.three_d and cfg["stability"]["creases"]:  # the trial crease is a 2D method
         raise ConfigError("stability.creases", f"= true is 2D only; allowed for geometry.kind = '{kind.name}': "
                           "false (docs/three-d.md, known gaps)")

@@ -84,7 +84,7 @@ def problem(cfg: dict, comm, setup: geometry.GeometrySetup | None = None) -> Pro
     """The problem of a resolved config: the geometry (built unless given), each layer's material, the loading
     (its surface ramp starting at the mu0 of the material under the permeable surface) and the
     discretization settings."""
-    setup = setup if setup is not None else geometry.build(cfg, comm)
+    setup = setup if setup is not None else geometry.build(config.geometry_input(cfg), comm)
     materials = layer_materials(cfg, sorted(set(setup.layers.values())))
     surface = setup.material_under("permeable", comm)
     p = Problem(comm, setup, materials, loading(cfg, materials[surface].mu0, setup.drive), discretization(cfg))

@@ -131,7 +131,7 @@ def _toml(text):
 
 def _measured_mesh(cfg, comm):
     """(element length along the top, number of film element layers) measured on the built mesh."""
-    tm = geometry.build(cfg, comm).tm
+    tm = geometry.build(config.geometry_input(cfg), comm).tm
     x = tm.mesh.geometry.x
     H, w = cfg["geometry"]["substrate_thickness"], cfg["geometry"]["film_thickness"]
     pts = np.concatenate(comm.allgather(x[:, :2]))
@@ -297,7 +297,7 @@ def test_mesh_command_writes_the_builtin_mesh(shared_tmp, comm, capsys, text, ce
     assert cli.main(["mesh", str(cfg_path), "-o", str(msh)]) == 0
     if comm.rank == 0:
         assert f"wrote {msh}" in capsys.readouterr().out
-    builtin = geometry.build(config.load(cfg_path), comm).tm
+    builtin = geometry.build(config.geometry_input(config.load(cfg_path)), comm).tm
     n_cells = fem_utils.num_global_cells(builtin.mesh)
     contents = on_rank0(_msh_contents, msh)
     assert sorted(n for d, n in contents if d == 2) == cells
@@ -534,7 +534,7 @@ def test_film_grading_makes_film_heights_geometric_towards_the_surface(comm, gra
     cfg = config.resolve(_toml(TINY), ["mesh.film_layers=3", f"mesh.film_grading={grading}"])
     _, _, nf = _measured_mesh(cfg, comm)
     assert nf == 3
-    tm = geometry.build(cfg, comm).tm
+    tm = geometry.build(config.geometry_input(cfg), comm).tm
     pts = np.concatenate(comm.allgather(tm.mesh.geometry.x[:, :2]))
     H, w = 0.15, 0.01
     y = np.unique(np.round(pts[(np.abs(pts[:, 0]) < 1e-12) & (pts[:, 1] >= H - 1e-12), 1], 13))
@@ -542,7 +542,7 @@ def test_film_grading_makes_film_heights_geometric_towards_the_surface(comm, gra
     assert heights.sum() == pytest.approx(w, rel=1e-10)
     assert heights[1:] / heights[:-1] == pytest.approx([1 / grading] * 2, rel=1e-8)
     tube_cfg = config.resolve(_toml(TINY_TUBE), ["mesh.film_layers=3", f"mesh.film_grading={grading}"])
-    tm = geometry.build(tube_cfg, comm).tm
+    tm = geometry.build(config.geometry_input(tube_cfg), comm).tm
     pts = np.concatenate(comm.allgather(tm.mesh.geometry.x[:, :2]))
     r = 0.3 - 0.06 - 0.01
     x = np.unique(np.round(pts[(np.abs(pts[:, 1]) < 1e-12) & (pts[:, 0] > 0) & (pts[:, 0] <= r + 0.01 + 1e-12), 0],
@@ -691,16 +691,16 @@ def test_auto_wrinkles_around_a_closed_msh_surface(shared_tmp, comm):
     user = {"geometry": {"kind": "msh", "file": str(shared_tmp / "tube.msh"),
                          "layers": {"film": "film", "substrate": "substrate"},
                          "boundaries": {"inner": "permeable", "outer": "fixed"}}}
-    assert geometry.build(config.resolve(user), comm).wrinkles == "around"
+    assert geometry.build(config.geometry_input(config.resolve(user)), comm).wrinkles == "around"
     user["geometry"]["wrinkles"] = "along"  # an explicit choice wins
-    assert geometry.build(config.resolve(user), comm).wrinkles == "along"
+    assert geometry.build(config.geometry_input(config.resolve(user)), comm).wrinkles == "along"
     # an open permeable surface: the bilayer's top
     bil = write_on_rank0(shared_tmp / "b.toml", TINY)
     assert cli.main(["mesh", str(bil), "-o", str(shared_tmp / "b.msh")]) == 0
     open_user = {"geometry": {"kind": "msh", "file": str(shared_tmp / "b.msh"),
                               "layers": {"film": "film", "substrate": "substrate"},
                               "boundaries": {"top": "permeable", "bottom": "fixed"}}}
-    assert geometry.build(config.resolve(open_user), comm).wrinkles == "along"
+    assert geometry.build(config.geometry_input(config.resolve(open_user)), comm).wrinkles == "along"
 
 
 # --- scripts --------------------------------------------------------------------------------------

@@ -136,9 +136,10 @@ def test_bad_msh_exits_2_with_one_line_and_no_result_dir(shared_tmp, capfd, file
                             f'boundaries = {boundaries}\n')
     comm.barrier()
     # the same config with the good file and the right groups passes the check
-    geometry.check(config.resolve({"geometry": {"kind": "msh", "file": str(good),
-                                                "layers": {"film": "film", "substrate": "substrate"},
-                                                "boundaries": {"top": "permeable", "bottom": "roller_y"}}}), comm)
+    good_cfg = config.resolve({"geometry": {"kind": "msh", "file": str(good),
+                                            "layers": {"film": "film", "substrate": "substrate"},
+                                            "boundaries": {"top": "permeable", "bottom": "roller_y"}}})
+    geometry.check(config.geometry_input(good_cfg), comm)
     capfd.readouterr()
     out = shared_tmp / "results"
     for command in (["run", str(cfg_path), "-o", str(out)],

@@ -48,9 +48,9 @@ def _trial(cfg, comm, size: float, resolution: int, fluid: str = "drained",
            grows: bool = False) -> tuple[CreaseTrial, float]:
     """The trial crease of length ``size`` x 1 mm (the block's and the swelling layer's thickness); ``grows``:
     in contact with its mirror image (the workflow's stiffness, kappa mu / h at the tip)."""
-    kind = geometry.kind_of(cfg)
+    kind = geometry.kind_of(cfg["geometry"]["kind"])
     c = size * 1.0
-    p = factory.problem(cfg, comm, setup=kind.crease_setup(cfg, comm, c / resolution, 1.5 * c))
+    p = factory.problem(cfg, comm, setup=kind.crease_setup(config.geometry_input(cfg), comm, c / resolution, 1.5 * c))
     mu = p.materials["film"].shear_modulus
     mirror = cfg["stability"]["contact_stiffness"] * mu * resolution / c if grows else None
     return CreaseTrial(p, c, factory.solver_settings(cfg), fluid=fluid, mirror_stiffness=mirror), c

@@ -162,9 +162,9 @@ def test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_stati
     t = 9700.0
 
     def one(on, fluid):
-        kind = geometry.kind_of(cfg)
+        kind = geometry.kind_of(cfg["geometry"]["kind"])
         c = 0.05 * H
-        p = factory.problem(cfg, on, setup=kind.crease_setup(cfg, on, c / 4, 1.5 * c))
+        p = factory.problem(cfg, on, setup=kind.crease_setup(config.geometry_input(cfg), on, c / 4, 1.5 * c))
         trial = CreaseTrial(p, c, factory.solver_settings(cfg), fluid=fluid,
                             content=profile if fluid == "transient" else None)
         try:

@@ -49,14 +49,14 @@ class ToySlab(GeometryKind):
     film_element_fraction = None
     provides = frozenset()
 
-    def validate(self, cfg):
-        if cfg["mesh"]["element_size"] > cfg["geometry"]["span"] / 2:
+    def validate(self, g):
+        if g.mesh["element_size"] > g.geometry["span"] / 2:
             raise ConfigError("mesh.element_size", "is too coarse for the toy slab")
 
-    def build(self, cfg, comm, msh_path=None):
+    def build(self, g, comm, msh_path=None):
         from app.geometry.tagged import mesh_from_builder
 
-        g, m = cfg["geometry"], cfg["mesh"]
+        g, m = g.geometry, g.mesh
         tm = mesh_from_builder(comm, "toy", _toy_model, g["span"], g["depth"], m["element_size"], m["film_layers"],
                                msh_path=msh_path)
         return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},

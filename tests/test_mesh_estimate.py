@@ -27,7 +27,7 @@ ABSURD = ["--set", "mesh.element_size=1e-6"]  # L = 2 mm: 2,000,000 elements alo
 @pytest.mark.parametrize("name", list(SMALL))
 def test_estimate_matches_the_built_mesh(name, comm):
     cfg = config.resolve(SMALL[name], [])
-    est = geometry.kind_of(cfg).estimate(cfg)
+    est = geometry.kind_of(cfg["geometry"]["kind"]).estimate(config.geometry_input(cfg))
     problem = factory.problem(cfg, comm)
     # the counting follows the builders exactly; the brief allows a few %
     assert est["cells"] == pytest.approx(problem.cells(), rel=0.02)
@@ -36,7 +36,7 @@ def test_estimate_matches_the_built_mesh(name, comm):
 
 
 def test_user_msh_has_no_estimate():
-    assert geometry.KINDS.get("msh").estimate({}) is None
+    assert geometry.KINDS.get("msh").estimate(geometry.GeometryInput("msh", {}, {})) is None
 
 
 def test_validate_prints_the_estimate(shared_tmp, capsys, comm):
@@ -80,7 +80,7 @@ def test_limit_is_on_the_cell_count(capsys):
     # 100 layers through (film 8 + substrate 92 with grading 1): 50,000 elements along L give 5,000,000
     sets = ["--set", "geometry.substrate_thickness=0.115", "--set", "mesh.substrate_grading=1.0"]
     cfg = config.load(BILAYER, [s for s in sets if s != "--set"] + ["mesh.element_size=4e-5"])
-    est = geometry.kind_of(cfg).estimate(cfg)
+    est = geometry.kind_of(cfg["geometry"]["kind"]).estimate(config.geometry_input(cfg))
     assert est["cells"] == MAX_CELLS, est
     assert cli.main(["validate", BILAYER, *sets, "--set", "mesh.element_size=4e-5"]) == 0
     assert cli.main(["validate", BILAYER, *sets, "--set", "mesh.element_size=3.99e-5"]) == 2

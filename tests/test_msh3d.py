@@ -83,8 +83,9 @@ def test_a_refined_hexahedral_file_has_8_times_the_cells_and_the_same_groups(sha
     from app import geometry
 
     _, path = _export(shared_tmp, "plate-r", PLATE, PLATE_MESH)
-    coarse = geometry.build(_user(path, PLATE_ROLES), comm)
-    fine = geometry.build(config.resolve({**_user(path, PLATE_ROLES), "mesh": {"refinements": 1}}, []), comm)
+    coarse = geometry.build(config.geometry_input(_user(path, PLATE_ROLES)), comm)
+    fine_cfg = config.resolve({**_user(path, PLATE_ROLES), "mesh": {"refinements": 1}}, [])
+    fine = geometry.build(config.geometry_input(fine_cfg), comm)
     def owned(g, name):  # a rank's cells of a group include its ghosts
         return int((g.tm.cells(name) < g.tm.mesh.topology.index_map(3).size_local).sum())
 

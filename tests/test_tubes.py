@@ -175,7 +175,7 @@ def test_elliptic_tube_with_aspect_ratio_one_is_the_circular_tube(shared_tmp, co
         n = tm.mesh.geometry.index_map().size_local
         return np.concatenate(comm.allgather(tm.mesh.geometry.x[:n, :2]))
 
-    built, grid = nodes(geometry.build(ell_cfg, comm).tm), nodes(msh.read(comm, msh_path))
+    built, grid = nodes(geometry.build(config.geometry_input(ell_cfg), comm).tm), nodes(msh.read(comm, msh_path))
     dist, match = cKDTree(grid).query(built)
     assert len(set(match)) == len(grid) == len(built)
     assert dist.max() < 2e-6

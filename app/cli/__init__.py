@@ -169,7 +169,7 @@ def cmd_mesh(args) -> int:
     from app import geometry
 
     comm = _comm()
-    line = geometry.export(config.load(args.config, args.set), Path(args.output), comm)
+    line = geometry.export(config.geometry_input(config.load(args.config, args.set)), Path(args.output), comm)
     _say(comm, f"hydrobuckle: {line}")
     return EXIT_OK
 

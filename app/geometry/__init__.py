@@ -12,6 +12,7 @@ from app.geometry.base import (  # noqa: F401  (the package's interface)
     HELD_COMPONENTS,
     KINDS,
     Drive,
+    GeometryInput,
     GeometryKind,
     GeometrySetup,
     kind_of,
@@ -28,27 +29,27 @@ for _kind in BUILTIN:
 DEFAULT_KIND = "bilayer"  # the paper's film on a substrate
 
 
-def build(cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
-    """The geometry of ``cfg``; with ``msh_path`` the kind also writes its gmsh mesh."""
-    return kind_of(cfg).build(cfg, comm, msh_path)
+def build(g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
+    """The geometry of ``g``; with ``msh_path`` the kind also writes its gmsh mesh."""
+    return kind_of(g).build(g, comm, msh_path)
 
 
-def check(cfg: dict, comm) -> None:
+def check(g: GeometryInput, comm) -> None:
     """Raise ConfigError (on every rank) for input errors only the geometry's files can show, without
     building a mesh (a user .msh: missing, unreadable, groups the config names but the file lacks).
     Everything else is checked by ``config.validate``. Commands call this before they create any result."""
-    kind_of(cfg).check_input(cfg, comm)
+    kind_of(g).check_input(g, comm)
 
 
-def export(cfg: dict, out, comm) -> str:
-    """``hydrobuckle mesh``: build the geometry of ``cfg`` and write its gmsh mesh to ``out``; the line that
+def export(g: GeometryInput, out, comm) -> str:
+    """``hydrobuckle mesh``: build the geometry of ``g`` and write its gmsh mesh to ``out``; the line that
     says what was written (cell and facet groups). A kind without a gmsh model of its own (a user's .msh) is
     a ConfigError naming geometry.kind."""
     from pathlib import Path
 
     from app.schema import ConfigError
 
-    kind = kind_of(cfg)
+    kind = kind_of(g)
     if not kind.exportable:
         able = [k.name for k in KINDS if k.exportable]
         raise ConfigError("geometry.kind", f"{kind.name!r} {kind.not_exportable_because}; allowed here: "
@@ -56,6 +57,6 @@ def export(cfg: dict, out, comm) -> str:
     out = Path(out)
     if comm.rank == 0:
         out.parent.mkdir(parents=True, exist_ok=True)
-    tm = kind.build(cfg, comm, msh_path=str(out)).tm
+    tm = kind.build(g, comm, msh_path=str(out)).tm
     return (f"wrote {out}: cell groups {sorted(tm.cell_names)}, facet groups {sorted(tm.facet_names)}; "
             f"{tm.info}")

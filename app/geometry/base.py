@@ -20,7 +20,8 @@ closed one (integer wavenumber).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import ClassVar
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 from app import fem_utils
 from app.registry import Registry
@@ -155,6 +156,19 @@ def size_line(est: dict) -> str:
             f"about {est['memory_mb'] / 1024:,.1f} GB (serial)")
 
 
+@dataclass(frozen=True)
+class GeometryInput:
+    """What a geometry kind reads of a resolved config, built at the top (:func:`app.config.geometry_input`): the
+    kind's name, its [geometry] table (the kind's own keys, resolved), the [mesh] table, the loading's kind and
+    the names of the config's [material.layers]. A kind never sees the whole config."""
+
+    kind: str
+    geometry: Mapping[str, Any]
+    mesh: Mapping[str, Any]
+    loading: str = "swelling"
+    layers: tuple[str, ...] = ()
+
+
 class GeometryKind:
     """One value of ``geometry.kind``. A kind declares its keys and defaults, checks a config before
     anything runs, and builds the tagged mesh with what it means for the problem. Subclass it, then
@@ -182,23 +196,23 @@ class GeometryKind:
     def defaults(self) -> dict:
         return {name: k.default for name, k in self.keys.items()}
 
-    def validate(self, cfg: dict) -> None:
+    def validate(self, g: GeometryInput) -> None:
         """Checks that relate this kind's keys to each other and to the mesh keys (ConfigError)."""
 
-    def check_input(self, cfg: dict, comm) -> None:
+    def check_input(self, g: GeometryInput, comm) -> None:
         """Input errors only the kind's files can show, without building a mesh (ConfigError on every
         rank). Commands call this before they create any result."""
 
-    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+    def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
         """The tagged mesh and what it means; with ``msh_path`` also write the mesh as .msh."""
         raise NotImplementedError
 
-    def refined(self, cfg: dict, exponent: int, factor: float) -> tuple[float, dict]:
+    def refined(self, g: GeometryInput, exponent: int, factor: float) -> tuple[float, dict]:
         """The mesh of a refinement study's level: refined ``exponent`` times by ``factor`` (coarsened if
         negative). Returns (the level's parameter, the config changes); ConfigError if there is no such
         level. The built-in kinds divide mesh.element_size by the factor and multiply mesh.film_layers by
         it, so element shapes are kept while h shrinks."""
-        mesh = cfg["mesh"]
+        mesh = g.mesh
         value = mesh["element_size"] / factor ** exponent
         layers = mesh["film_layers"] * factor ** exponent
         if layers < 1 or abs(layers - round(layers)) > 1e-9:
@@ -221,16 +235,16 @@ class GeometryKind:
     #: a trial crease (stability.creases, app.onset.creases) can be placed: crease_setup and crease_line
     creases: ClassVar[bool] = False
 
-    def crease_setup(self, cfg: dict, comm, tip_size: float, tip_radius: float,
+    def crease_setup(self, g: GeometryInput, comm, tip_size: float, tip_radius: float,
                      tip_depth: float = 0.0) -> GeometrySetup:
         """The geometry meshed for a trial crease on a symmetry line of the body (:attr:`creases`)."""
         raise NotImplementedError
 
-    def crease_line(self, cfg: dict) -> float:
+    def crease_line(self, g: GeometryInput) -> float:
         """x of the symmetry line (held in x) the trial crease sits on."""
         raise NotImplementedError
 
-    def estimate(self, cfg: dict) -> dict | None:
+    def estimate(self, g: GeometryInput) -> dict | None:
         """The mesh size from the keys alone, without meshing (:func:`structured_size`); None if unknown
         (a user's file)."""
         return None
@@ -239,8 +253,9 @@ class GeometryKind:
 KINDS: Registry[GeometryKind] = Registry("geometry kind")
 
 
-def kind_of(cfg: dict) -> GeometryKind:
-    name = cfg["geometry"]["kind"]
+def kind_of(g: GeometryInput | str) -> GeometryKind:
+    """The registered kind of a geometry input (or of a kind's name); ConfigError naming geometry.kind if none."""
+    name = g if isinstance(g, str) else g.kind
     if name not in KINDS:
         raise ConfigError("geometry.kind", f"unsupported kind {name!r}")
     return KINDS.get(name)

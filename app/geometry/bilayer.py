@@ -6,8 +6,17 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from app.geometry.base import (CrossSection, Drive, GeometryKind, GeometrySetup, base_key, base_role, layer_keys,
-                                planar_cross_section)
+from app.geometry.base import (
+    CrossSection,
+    Drive,
+    GeometryInput,
+    GeometryKind,
+    GeometrySetup,
+    base_key,
+    base_role,
+    layer_keys,
+    planar_cross_section,
+)
 from app.schema import ConfigError, gt, key
 
 if TYPE_CHECKING:
@@ -30,35 +39,35 @@ class Bilayer(GeometryKind):
     def cross_section(self, geo: dict) -> CrossSection:
         return planar_cross_section(geo, drive=Drive("right", 0, geo["length"]))
 
-    def validate(self, cfg: dict) -> None:
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+    def validate(self, g: GeometryInput) -> None:
+        geo, mesh = g.geometry, g.mesh
         if mesh["element_size"] > geo["length"] / 2:
             raise ConfigError("mesh.element_size",
                               f"= {mesh['element_size']:g} is too coarse; allowed: <= geometry.length/2 "
                               f"= {geo['length'] / 2:g}")
-        if geo["base"] == "clamped" and cfg["loading"]["kind"] == "compression":
+        if geo["base"] == "clamped" and g.loading == "compression":
             raise ConfigError("geometry.base", "= 'clamped' holds the base's u_x, which the compression moves at "
                               "the right edge; allowed with loading.kind = 'compression': 'rollers'")
 
-    def estimate(self, cfg: dict) -> dict:
+    def estimate(self, g: GeometryInput) -> dict:
         from app.geometry.base import structured_size
         from meshes.bilayer import film_interface_height, substrate_layer_count
 
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+        geo, mesh = g.geometry, g.mesh
         nx = max(1, round(geo["length"] / mesh["element_size"]))
         first = film_interface_height(geo["film_thickness"], mesh["film_layers"], mesh["film_grading"])
         ny = mesh["film_layers"] + substrate_layer_count(geo["substrate_thickness"], first * mesh["substrate_grading"],
                                                          mesh["substrate_grading"])
         return structured_size(nx, ny, closed=False, what="along the film")
 
-    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+    def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
+        geo, mesh = g.geometry, g.mesh
         tm = tagged_mesh(comm, geo["length"], geo["substrate_thickness"], geo["film_thickness"],
                          mesh["element_size"], mesh["film_layers"], mesh["substrate_grading"],
                          film_grading=mesh["film_grading"], msh_path=msh_path)
         return self._setup(tm, geo)
 
-    def crease_setup(self, cfg: dict, comm, tip_size: float, tip_radius: float,
+    def crease_setup(self, g: GeometryInput, comm, tip_size: float, tip_radius: float,
                      tip_depth: float = 0.0) -> GeometrySetup:
         """The bilayer meshed for a trial crease at its left edge (a symmetry line: u_x = 0), graded from
         ``tip_size`` within ``tip_radius`` of the top left corner, or of the left edge down to ``tip_depth``
@@ -66,13 +75,13 @@ class Bilayer(GeometryKind):
         from app.geometry.tagged import mesh_from_builder
         from meshes import crease
 
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+        geo, mesh = g.geometry, g.mesh
         tm = mesh_from_builder(comm, "crease", crease.add_model, geo["length"], geo["substrate_thickness"],
                                geo["film_thickness"], mesh["element_size"], tip_size, tip_radius,
                                geo["film_thickness"] / mesh["film_layers"], tip_depth=tip_depth)
         return self._setup(tm, geo)
 
-    def crease_line(self, cfg: dict) -> float:
+    def crease_line(self, g: GeometryInput) -> float:
         """x of the symmetry line a trial crease sits on (the left edge)."""
         return 0.0
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from app.geometry.base import BOUNDARY_ROLES, GeometryKind, GeometrySetup
+from app.geometry.base import BOUNDARY_ROLES, GeometryKind, GeometryInput, GeometrySetup
 from app.schema import ConfigError, key, one_of
 
 WRINKLE_MEASURES = ("auto", "along", "around")
@@ -34,15 +34,15 @@ class UserMsh(GeometryKind):
     uniform_refinement = True
     dim = 2  # the file's cells: quadrilaterals (2) or hexahedra (3)
 
-    def validate(self, cfg: dict) -> None:
-        geo = cfg["geometry"]
+    def validate(self, g: GeometryInput) -> None:
+        geo = g.geometry
         if not geo.get("file"):
             raise ConfigError("geometry.file", f"must name a .msh file for geometry.kind = '{self.name}'")
         layers, boundaries = geo.get("layers"), geo.get("boundaries")
         if not layers:
             raise ConfigError("geometry.layers", "must map cell physical groups to materials, e.g. "
                               "{ film = \"film\", substrate = \"substrate\" }")
-        known = {"film", "substrate"} | set(cfg["material"].get("layers") or {})
+        known = {"film", "substrate"} | set(g.layers)
         for group, mat in layers.items():
             if mat not in known:
                 raise ConfigError(f"geometry.layers.{group}", f"= {mat!r} is not a material; allowed: "
@@ -56,18 +56,18 @@ class UserMsh(GeometryKind):
         if "permeable" not in boundaries.values():
             raise ConfigError("geometry.boundaries", "needs at least one 'permeable' boundary (where fluid enters)")
 
-    def check_input(self, cfg: dict, comm) -> None:
+    def check_input(self, g: GeometryInput, comm) -> None:
         """The file must exist and be a readable quadrilateral gmsh mesh with every cell group given a
         material and every named group present."""
-        geo = cfg["geometry"]
+        geo = g.geometry
         cells, facets = physical_groups(comm, geo["file"], dim=self.dim)
         _check_groups(geo, cells, facets)
 
-    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
-        geo = cfg["geometry"]
+    def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
+        geo = g.geometry
         from app.geometry.tagged import is_closed
 
-        tm = read(comm, geo["file"], refinements=cfg["mesh"]["refinements"])
+        tm = read(comm, geo["file"], refinements=g.mesh["refinements"])
         _check_groups(geo, tm.cell_names, tm.facet_names)
         wrinkles = geo.get("wrinkles") or "auto"
         if wrinkles == "auto":
@@ -76,16 +76,16 @@ class UserMsh(GeometryKind):
         return GeometrySetup(tm, dict(geo["layers"]), dict(geo["boundaries"]), wrinkles=wrinkles)
 
 
-    def refined(self, cfg: dict, exponent: int, factor: float) -> tuple[float, dict]:
+    def refined(self, g: GeometryInput, exponent: int, factor: float) -> tuple[float, dict]:
         """A file has no element size to scale: level ``exponent`` splits every cell of the file
         ``mesh.refinements + exponent`` times (a negative exponent undoes refinements the config asked
         for). The parameter is the element size relative to the file's."""
         if factor != 2:
             raise ConfigError("mesh.refinements", f"a .msh mesh is refined by uniform splitting (factor 2); "
                               f"a refinement factor of {factor:g} is not possible")
-        level = cfg["mesh"]["refinements"] + exponent
+        level = g.mesh["refinements"] + exponent
         if level < 0:
-            raise ConfigError("mesh.refinements", f"= {cfg['mesh']['refinements']} cannot be coarsened "
+            raise ConfigError("mesh.refinements", f"= {g.mesh['refinements']} cannot be coarsened "
                               f"{-exponent} time(s): a .msh mesh is only refined (every cell split into "
                               f"{2 ** self.dim}); "
                               f"allowed: mesh.refinements >= {-exponent}, or refine instead of coarsening")
@@ -109,13 +109,13 @@ class UserMsh3D(UserMsh):
                        "described: plane (flat, across a coordinate axis), cylinder (about the z axis) or auto"),
     }
 
-    def check_input(self, cfg: dict, comm) -> None:
+    def check_input(self, g: GeometryInput, comm) -> None:
         """As the 2D kind's, and the permeable surface must be one on which 3D modes are described
         (:func:`surface_shape_of`), read from the file before anything runs."""
         from app.geometry.tagged import gmsh_session, on_gmsh_rank
         from meshes import msh
 
-        geo = cfg["geometry"]
+        geo = g.geometry
         with gmsh_session(comm, "user-msh-groups", 0) as active:
             cells, facets = _merge(comm, Path(geo["file"]), 0, active, self.dim)
             _check_groups(geo, cells, facets)
@@ -123,11 +123,11 @@ class UserMsh3D(UserMsh):
             xyz = on_gmsh_rank(comm, 0, active, msh.facet_group_coordinates, facets, permeable)
         surface_shape_of(xyz, geo.get("surface") or "auto", geo["file"])
 
-    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+    def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
         from app.geometry.tagged import facet_nodes
 
-        geo = cfg["geometry"]
-        tm = read(comm, geo["file"], refinements=cfg["mesh"]["refinements"], dim=3)
+        geo = g.geometry
+        tm = read(comm, geo["file"], refinements=g.mesh["refinements"], dim=3)
         _check_groups(geo, tm.cell_names, tm.facet_names)
         permeable = [g for g, r in geo["boundaries"].items() if r == "permeable"]
         shape = surface_shape_of(facet_nodes(tm, permeable), geo.get("surface") or "auto", geo["file"])

@@ -8,9 +8,19 @@ plate's too, with a mode exp(i k.x) critical where |k| meets the 1D margin curve
 
 from __future__ import annotations
 
-from app.geometry.base import (MEMORY_BASE_MB, MEMORY_PER_DOF_KB, CrossSection, Drive, GeometryKind, GeometrySetup,
-                               base_key, planar_cross_section,
-                               base_role, layer_keys)
+from app.geometry.base import (
+    MEMORY_BASE_MB,
+    MEMORY_PER_DOF_KB,
+    CrossSection,
+    Drive,
+    GeometryInput,
+    GeometryKind,
+    GeometrySetup,
+    base_key,
+    base_role,
+    layer_keys,
+    planar_cross_section,
+)
 from app.schema import ConfigError, gt, key
 
 
@@ -36,8 +46,8 @@ class Plate(GeometryKind):
     def cross_section(self, geo: dict) -> CrossSection:
         return planar_cross_section(geo, width=geo["width"], drive=Drive("right", 0, geo["length"]))
 
-    def validate(self, cfg: dict) -> None:
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+    def validate(self, g: GeometryInput) -> None:
+        geo, mesh = g.geometry, g.mesh
         if mesh["element_size"] > geo["length"] / 2:
             raise ConfigError("mesh.element_size", f"= {mesh['element_size']:g} is too coarse; allowed: "
                               f"<= geometry.length/2 = {geo['length'] / 2:g}")
@@ -45,10 +55,10 @@ class Plate(GeometryKind):
             raise ConfigError("mesh.element_size", f"= {mesh['element_size']:g} is too coarse; allowed: "
                               f"<= 1.5 geometry.width = {1.5 * geo['width']:g} (one element across)")
 
-    def estimate(self, cfg: dict) -> dict:
+    def estimate(self, g: GeometryInput) -> dict:
         from meshes.bilayer import film_interface_height, substrate_layer_count
 
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+        geo, mesh = g.geometry, g.mesh
         nx = max(1, round(geo["length"] / mesh["element_size"]))
         nz = max(1, round(geo["width"] / mesh["element_size"]))
         first = film_interface_height(geo["film_thickness"], mesh["film_layers"], mesh["film_grading"])
@@ -62,11 +72,11 @@ class Plate(GeometryKind):
         return {"cells": nx * ny * nz, "dofs": dofs, "memory_mb": memory,
                 "detail": f"{nx} x {nz} elements over the plate x {ny} layers"}
 
-    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+    def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
         from app.geometry.tagged import mesh_from_builder
         from meshes import plate
 
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+        geo, mesh = g.geometry, g.mesh
         tm = mesh_from_builder(comm, "plate", plate.add_model, geo["length"], geo["width"], geo["substrate_thickness"],
                                geo["film_thickness"], mesh["element_size"], mesh["film_layers"],
                                mesh["substrate_grading"], film_grading=mesh["film_grading"], msh_path=msh_path)

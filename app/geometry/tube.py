@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from app.geometry.base import CrossSection, GeometryKind, GeometrySetup, layer_keys
+from app.geometry.base import CrossSection, GeometryKind, GeometryInput, GeometrySetup, layer_keys
 from app.schema import ConfigError, gt, in_closed, key
 
 if TYPE_CHECKING:
@@ -34,8 +34,8 @@ class Tube(GeometryKind):
     def aspect_ratio(self, geo: dict) -> float:
         return 1.0
 
-    def validate(self, cfg: dict) -> None:
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+    def validate(self, g: GeometryInput) -> None:
+        geo, mesh = g.geometry, g.mesh
         R, H, w = geo["outer_radius"], geo["substrate_thickness"], geo["film_thickness"]
         if H + w >= R:
             raise ConfigError("geometry.substrate_thickness",
@@ -51,12 +51,12 @@ class Tube(GeometryKind):
         except GeometryError as err:
             raise ConfigError(err.key, str(err)) from None
 
-    def section_size(self, cfg: dict) -> tuple[int, int]:
+    def section_size(self, g: GeometryInput) -> tuple[int, int]:
         """(elements around the passage, element layers through film and substrate), as meshes.tube meshes."""
         from meshes.bilayer import film_interface_height, substrate_layer_count
         from meshes.tube import ellipse_perimeter, semi_axes
 
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+        geo, mesh = g.geometry, g.mesh
         R, H, w = geo["outer_radius"], geo["substrate_thickness"], geo["film_thickness"]
         a, b = semi_axes(R - H - w, self.aspect_ratio(geo))
         m = max(2, round(ellipse_perimeter(a, b) / mesh["element_size"] / 4))  # as meshes.tube.add_section
@@ -64,15 +64,15 @@ class Tube(GeometryKind):
         ny = mesh["film_layers"] + substrate_layer_count(H, first * mesh["substrate_grading"], mesh["substrate_grading"])
         return 4 * m, ny
 
-    def estimate(self, cfg: dict) -> dict:
+    def estimate(self, g: GeometryInput) -> dict:
         from app.geometry.base import structured_size
 
-        return structured_size(*self.section_size(cfg), closed=True, what="around the passage")
+        return structured_size(*self.section_size(g), closed=True, what="around the passage")
 
-    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+    def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
         from meshes.tube import GeometryError
 
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+        geo, mesh = g.geometry, g.mesh
         try:
             tm = tagged_mesh(comm, geo["outer_radius"], geo["substrate_thickness"], geo["film_thickness"],
                              mesh["element_size"], mesh["film_layers"], mesh["substrate_grading"],
@@ -95,8 +95,8 @@ class EllipticTube(Tube):
     def aspect_ratio(self, geo: dict) -> float:
         return geo["aspect_ratio"]
 
-    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
-        return grown_at_minor_vertex(super().build(cfg, comm, msh_path))
+    def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
+        return grown_at_minor_vertex(super().build(g, comm, msh_path))
 
 
 def grown_at_minor_vertex(setup: GeometrySetup) -> GeometrySetup:

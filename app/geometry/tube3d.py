@@ -7,7 +7,7 @@ run's answer (each critical mode's (n around, m along the axis) is reported)."""
 
 from __future__ import annotations
 
-from app.geometry.base import MEMORY_BASE_MB, MEMORY_PER_DOF_KB, GeometrySetup, layer_keys
+from app.geometry.base import MEMORY_BASE_MB, MEMORY_PER_DOF_KB, GeometryInput, GeometrySetup, layer_keys
 from app.geometry.tube import EllipticTube, Tube, grown_at_minor_vertex
 from app.schema import ConfigError, gt, in_closed, key
 
@@ -29,13 +29,13 @@ class Tube3D(Tube):
                                    "element size along the axis / mesh.element_size (tube-3d)"),
     }
 
-    def axial_elements(self, cfg: dict) -> int:
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+    def axial_elements(self, g: GeometryInput) -> int:
+        geo, mesh = g.geometry, g.mesh
         return max(1, round(geo["length"] / (mesh["element_size"] * geo["axial_element_ratio"])))
 
-    def estimate(self, cfg: dict) -> dict:
-        around, layers = self.section_size(cfg)
-        nz = self.axial_elements(cfg)
+    def estimate(self, g: GeometryInput) -> dict:
+        around, layers = self.section_size(g)
+        nz = self.axial_elements(g)
         nodes = around * (layers + 1) * (nz + 1)
         faces = around * (layers + 1) * nz + around * layers * nz + around * layers * (nz + 1)
         dofs = 3 * nodes + faces
@@ -43,18 +43,18 @@ class Tube3D(Tube):
         return {"cells": around * layers * nz, "dofs": dofs, "memory_mb": memory,
                 "detail": f"{around} elements around x {nz} along the axis x {layers} layers"}
 
-    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
+    def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
         from app.geometry.tagged import mesh_from_builder
         from meshes import tube3d
         from meshes.tube import GeometryError
 
-        geo, mesh = cfg["geometry"], cfg["mesh"]
+        geo, mesh = g.geometry, g.mesh
         try:
             tm = mesh_from_builder(comm, "tube-3d", tube3d.add_model, geo["outer_radius"], geo["substrate_thickness"],
                                    geo["film_thickness"], mesh["element_size"], mesh["film_layers"],
                                    mesh["substrate_grading"], geo["length"], aspect_ratio=self.aspect_ratio(geo),
                                    film_grading=mesh["film_grading"],
-                                   axial_elements=self.axial_elements(cfg), msh_path=msh_path)
+                                   axial_elements=self.axial_elements(g), msh_path=msh_path)
         except GeometryError as err:
             raise ConfigError(err.key, str(err)) from None
         return GeometrySetup(tm, {"film": "film", "substrate": "substrate"},
@@ -75,5 +75,5 @@ class EllipticTube3D(Tube3D):
     def aspect_ratio(self, geo: dict) -> float:
         return geo["aspect_ratio"]
 
-    def build(self, cfg: dict, comm, msh_path: str | None = None) -> GeometrySetup:
-        return grown_at_minor_vertex(super().build(cfg, comm, msh_path))
+    def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
+        return grown_at_minor_vertex(super().build(g, comm, msh_path))

@@ -94,7 +94,8 @@ def refined_configs(cfg: dict, study: str, levels: int, time_factor: float = TIM
         else:
             from app import geometry
 
-            value, more = geometry.kind_of(cfg).refined(cfg, e, mesh_factor)
+            g = config.geometry_input(cfg)
+            value, more = geometry.kind_of(g).refined(g, e, mesh_factor)
             changes.update(more)
         out.append((f"{study}{k}", value, variant(cfg, changes)))
     return out

@@ -62,7 +62,8 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
     """The crease onset on every level and the extrapolated answer (a dict for summary.json). Under swelling,
     with the run's wrinkling onset ``critical``: also the equilibrium state's growth at its time
     (``wrinkling_equilibrium``), which says whether that onset was reached quasi-statically."""
-    kind = geometry.kind_of(cfg)
+    g = config.geometry_input(cfg)
+    kind = geometry.kind_of(g)
     c = crease_length(cfg)
     finest = cfg["stability"]["crease_resolution"]
     resolutions = [finest // LEVEL_RATIO ** k for k in (2, 1, 0)]
@@ -75,14 +76,14 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
     queue = list(resolutions)
     while queue:
         resolution = queue.pop(0)
-        setup = (kind.crease_setup(cfg, comm, c / resolution, TIP_RADIUS * c, tip_depth=depth) if depth
-                 else kind.crease_setup(cfg, comm, c / resolution, TIP_RADIUS * c))
+        setup = (kind.crease_setup(g, comm, c / resolution, TIP_RADIUS * c, tip_depth=depth) if depth
+                 else kind.crease_setup(g, comm, c / resolution, TIP_RADIUS * c))
         problem = factory.problem(cfg, comm, setup=setup)
         surface = problem.materials[setup.material_under("permeable", comm)]
         mu = getattr(surface, config.law(cfg).stiffness)  # the energies are reported per mu c^2
         # a growing crease: the mirror contact's stiffness per area, kappa mu / h at the tip's elements
         mirror = cfg["stability"]["contact_stiffness"] * mu * resolution / c if grows else None
-        trial = CreaseTrial(problem, c, settings, line=kind.crease_line(cfg), fluid=fluid, mirror_stiffness=mirror,
+        trial = CreaseTrial(problem, c, settings, line=kind.crease_line(g), fluid=fluid, mirror_stiffness=mirror,
                             content=content)
         swelling = trial.system.fluid != "frozen"
         # the load's end: the bath's equilibria change until the ramp ends; a transient's content to time.end
@@ -123,7 +124,7 @@ def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = 
         rich = _extrapolated(times, snap)
         t, err = rich["converged"], rich["errors"][-1]
         onset = {"time": t, "time_error": err, "order": rich["order"],
-                 "position_mm": [kind.crease_line(cfg), _top(cfg)]}
+                 "position_mm": [kind.crease_line(g), _top(cfg)]}
         if snap:
             onset["snap"] = True
         if swelling:  # each level's flat growth at its onset, extrapolated like the times

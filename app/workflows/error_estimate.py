@@ -98,7 +98,7 @@ def companion_plan(base: dict, study: str, out: dict, log):
         log.info(f"error estimate: no companion run in {study}: {err}")
         return None
     if direction == "refined":
-        how = ("the file's cells split once" if geometry.kind_of(base).uniform_refinement
+        how = ("the file's cells split once" if geometry.kind_of(base["geometry"]["kind"]).uniform_refinement
                else "element size / 2, film layers x 2")
         log.info(f"error estimate: the mesh cannot be coarsened, so its companion run is the mesh refined by 2 "
                  f"({how}: about 4x the cells of the run)")

@@ -43,7 +43,8 @@ def mesh_size(cfg: dict, force: bool, label: str | None = None) -> dict | None:
     from app import geometry
     from app.geometry.base import MAX_CELLS, size_line
 
-    est = geometry.kind_of(cfg).estimate(cfg)
+    g = config.geometry_input(cfg)
+    est = geometry.kind_of(g).estimate(g)
     if est is not None and est["cells"] > MAX_CELLS and not force:
         way_out = ", or --force" if label is None else " (only 'run' accepts such a mesh, with --force)"
         where = "" if label is None else f" ({label})"
@@ -65,7 +66,7 @@ def geometry_inputs(cfgs, comm, labels=None) -> None:
             continue
         seen.add(key)
         try:
-            geometry.check(cfg, comm)
+            geometry.check(config.geometry_input(cfg), comm)
         except config.ConfigError as err:
             if labels is None:
                 raise

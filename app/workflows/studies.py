@@ -117,7 +117,7 @@ def build_cases(base_cfg_user: dict, param: str, values: list, outdir: Path, ove
                 # keep film elements' shape: element length along the film <= f w, f the kind's (bilayer 0.4, tubes 0.5)
                 from app import geometry
 
-                f = geometry.kind_of(cfg).film_element_fraction
+                f = geometry.kind_of(cfg["geometry"]["kind"]).film_element_fraction
                 if f is not None:
                     changes["mesh.element_size"] = min(cfg["mesh"]["element_size"], f * v)
             if isomodes:
