@@ -2,7 +2,7 @@
 # The six studies of the paper that the exact 1D reduction covers (results/<study>-reduced/): study.csv,
 # study.png, isomodes.png, each case by `hydrobuckle study NAME --reduced` (one rank per case, about 10 s).
 # Resumable. NP ranks (default 2). Extra arguments go to every call (e.g. --set stability.criterion=undrained).
-# Then: .venv/bin/python scripts/reduced_tables.py prints the tables of docs/reproduction.md.
+# Then: hydrobuckle study --tables prints the tables of docs/reproduction.md.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"

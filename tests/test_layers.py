@@ -51,3 +51,18 @@ def test_an_upward_import_breaks_the_contract(shared_tmp):
                                              "import app.schema  # noqa: E402")))
     assert done.returncode == 1, done.stdout[-3000:]
     assert "meshes.bilayer -> app.schema" in done.stdout, done.stdout[-3000:]
+
+
+def test_reading_and_checking_a_config_does_not_load_dolfinx():
+    """The config layer and the geometry kinds' keys, defaults and checks need no finite elements: reading and
+    validating a config (what `hydrobuckle validate` and every command's pre-flight do) leaves dolfinx and PETSc
+    unloaded (about a second of start-up each), so a bad config is refused at once. A module-level import of
+    the compat layer or of fem_utils in a room config reads (geometry.base, the kinds, the criteria's
+    registry) breaks this."""
+    probe = ("import sys, app.config; app.config.validate(app.config.resolve({'geometry': {'kind': 'tube'}})); "
+             "print(sorted(m for m in ('dolfinx', 'petsc4py') if m in sys.modules))")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = on_rank0(lambda: subprocess.run([sys.executable, "-c", probe], cwd=ROOT, env=env, capture_output=True,
+                                           text=True, timeout=120))
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "[]", done.stdout

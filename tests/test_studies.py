@@ -68,6 +68,42 @@ def test_cli_study_rejects_bad_input(shared_tmp, capsys):
         assert capsys.readouterr().err.strip().splitlines() == ["hydrobuckle: error: config file 'nope.toml' does not exist"]
 
 
+def test_study_tables_print_each_studys_results_and_its_1d_reduction(shared_tmp, capsys):
+    """``study --tables DIR``: one markdown table per study from DIR/<study>/study.csv, with every value of a
+    row in its column's format ("-" where the case has none), and the 1D reduction's table from
+    DIR/<study>-reduced/study.csv where that was run; a study not run says so. A DIR that does not exist is
+    bad input: exit 2, one line naming it."""
+    root, study = shared_tmp / "tables", "bilayer-modulus-ratio"
+    rows = {study: [{"series": "", "value": 2.0, "status": "wrinkled", "g_c_um": 12.34567, "N_c": 3.5,
+                               "t_c": 0.123456, "mu_c": -1.2345, "wall_time_s": 42.4},
+                              {"series": "", "value": 5.0, "status": "failed"}],
+            f"{study}-reduced": [{"series": "", "value": 2.0, "status": "done", "onset": "wrinkles",
+                                       "g_c_um": 12.3, "g_c_error_um": 0.0004, "N_c": 3.5, "t_c": 0.1,
+                                       "mu_c": -1.2, "wall_time_s": 1.26}]}
+    if MPI.COMM_WORLD.rank == 0:
+        for name, table in rows.items():
+            (root / name).mkdir(parents=True)
+            with open(root / name / "study.csv", "w", newline="") as f:
+                w = csv.DictWriter(f, fieldnames=studies.COLUMNS)
+                w.writeheader()
+                w.writerows({k: r.get(k, "") for k in studies.COLUMNS} for r in table)
+    MPI.COMM_WORLD.barrier()
+    capsys.readouterr()
+    assert cli.main(["study", "--tables", str(root)]) == 0
+    out = capsys.readouterr().out
+    assert "| - | 2.0 | wrinkled | 12.346 | 3.5 | 0.1235 | -1.23 | 42 |" in out
+    assert "| - | 5.0 | failed | - | - | - | - | - |" in out
+    assert f"### {study} (1D reduction)" in out
+    assert "| - | 2.0 | wrinkles | 12.300 | 0.000 | 3.5 | 0.1000 | -1.20 | 1.3 |" in out
+    for name in studies.STUDIES:  # every study has its section, run or not
+        assert f"### {name}\n" in out
+    assert out.count("(not run)") == len(studies.STUDIES) - 1
+    assert cli.main(["study", "--tables", str(root / "nope")]) == 2
+    if MPI.COMM_WORLD.rank == 0:
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "nope: no such directory" in err[0]
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="groups of ranks need several ranks")
 def test_rank_groups_give_the_same_results_as_one_by_one(shared_tmp):

@@ -125,6 +125,14 @@ def cmd_reduced(args) -> int:
 def cmd_study(args) -> int:
     from app.workflows import studies
 
+    if args.tables is not None:
+        from app.workflows.study_tables import tables
+
+        if not Path(args.tables).is_dir():
+            raise config.ConfigError("", f"study --tables {args.tables}: no such directory; allowed: a directory "
+                                     "holding <study>/study.csv (default results)")
+        print(tables(Path(args.tables)), end="")
+        return EXIT_OK
     if args.list or not args.name:
         print(studies.listing())
         if args.list:

@@ -49,6 +49,9 @@ def parser() -> argparse.ArgumentParser:
               output="study directory (default results/<study name>)")
     st.add_argument("name", nargs="?", help="study name")
     st.add_argument("--list", action="store_true", help="list the studies and exit")
+    st.add_argument("--tables", nargs="?", const="results", metavar="DIR",
+                    help="print every study's tables (docs/reproduction.md) from the results under DIR (default "
+                         "results: each <study>/study.csv and <study>-reduced/study.csv) and exit")
     st.add_argument("--values", help="comma-separated values replacing the study's defaults")
     sw = _add(sub, "sweep", "sweep one config key over values", output="study directory (default "
               "results/<config name>-sweep)")

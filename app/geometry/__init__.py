@@ -22,6 +22,7 @@ from app.geometry.msh import UserMsh, UserMsh3D
 from app.geometry.plate import Plate
 from app.geometry.tube import EllipticTube, Tube
 from app.geometry.tube3d import EllipticTube3D, Tube3D
+from app.schema import ConfigError
 
 BUILTIN = (Bilayer(), Tube(), EllipticTube(), Plate(), Tube3D(), EllipticTube3D(), UserMsh(), UserMsh3D())  # registration order = the order docs list them
 for _kind in BUILTIN:
@@ -46,8 +47,6 @@ def export(g: GeometryInput, out, comm) -> str:
     says what was written (cell and facet groups). A kind without a gmsh model of its own (a user's .msh) is
     a ConfigError naming geometry.kind."""
     from pathlib import Path
-
-    from app.schema import ConfigError
 
     kind = kind_of(g)
     if not kind.exportable:

@@ -19,11 +19,10 @@ closed one (integer wavenumber).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from app import fem_utils
 from app.registry import Registry
 from app.schema import ConfigError, Key, gt, key, one_of
 
@@ -87,6 +86,8 @@ class GeometrySetup:
     def material_under(self, role: str, comm) -> str:
         """The material of most cells next to the facets of ``role``: the surface chemical potential ramp
         starts at its mu0. Without such cells: "film", or (no layer called so) the first material by name."""
+        from app import fem_utils  # dolfinx once a mesh exists: config and validation stay light without it
+
         domain = self.tm.mesh
         tdim = domain.topology.dim
         domain.topology.create_connectivity(tdim - 1, tdim)

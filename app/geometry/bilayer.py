@@ -16,6 +16,7 @@ from app.geometry.base import (
     base_role,
     layer_keys,
     planar_cross_section,
+    structured_size,
 )
 from app.schema import ConfigError, gt, key
 
@@ -50,7 +51,6 @@ class Bilayer(GeometryKind):
                               "the right edge; allowed with loading.kind = 'compression': 'rollers'")
 
     def estimate(self, g: GeometryInput) -> dict:
-        from app.geometry.base import structured_size
         from meshes.bilayer import film_interface_height, substrate_layer_count
 
         geo, mesh = g.geometry, g.mesh

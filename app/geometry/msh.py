@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from app.geometry.base import BOUNDARY_ROLES, GeometryKind, GeometryInput, GeometrySetup
+from app.geometry.base import BOUNDARY_ROLES, GeometryInput, GeometryKind, GeometrySetup
 from app.schema import ConfigError, key, one_of
 
 WRINKLE_MEASURES = ("auto", "along", "around")
@@ -74,7 +74,6 @@ class UserMsh(GeometryKind):
             wrinkles = "around" if is_closed(tm, [g for g, r in geo["boundaries"].items()
                                                   if r == "permeable"]) else "along"
         return GeometrySetup(tm, dict(geo["layers"]), dict(geo["boundaries"]), wrinkles=wrinkles)
-
 
     def refined(self, g: GeometryInput, exponent: int, factor: float) -> tuple[float, dict]:
         """A file has no element size to scale: level ``exponent`` splits every cell of the file

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from app.geometry.base import CrossSection, GeometryKind, GeometryInput, GeometrySetup, layer_keys
+from app.geometry.base import CrossSection, GeometryInput, GeometryKind, GeometrySetup, layer_keys, structured_size
 from app.schema import ConfigError, gt, in_closed, key
 
 if TYPE_CHECKING:
@@ -65,8 +65,6 @@ class Tube(GeometryKind):
         return 4 * m, ny
 
     def estimate(self, g: GeometryInput) -> dict:
-        from app.geometry.base import structured_size
-
         return structured_size(*self.section_size(g), closed=True, what="around the passage")
 
     def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:

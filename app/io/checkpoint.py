@@ -48,6 +48,7 @@ from app import config
 from app.io import writes
 from app.io.dof_layout import DofLayout, LayoutMismatch
 from app.io.result_identity import first_difference, input_files, result_hash
+from app.model.surface import SurfaceProfiles
 
 FILE = "checkpoint.npz"
 FORMAT = 1
@@ -189,8 +190,6 @@ class Resume:
 
     def profiles(self):
         """The followed branch's :class:`~app.model.surface.SurfaceProfiles` up to the checkpoint."""
-        from app.model.surface import SurfaceProfiles
-
         if not self.profile_arrays:
             return SurfaceProfiles()
         return SurfaceProfiles.from_arrays(self.profile_arrays, self.meta.get("profiles_closed", False))

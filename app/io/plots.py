@@ -8,6 +8,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from app.model.shapes import SHAPES, along_profile, around_profile
+
 
 def history_plot(rows: list[dict], path, critical: dict | None = None) -> None:
     """Growth and surface chemical potential against time (two stacked panels); ``critical`` (the
@@ -46,7 +48,6 @@ def mode_plot(polys, profile, geo, crossing, path) -> None:
 
     X, U, M, layer = polys
     x_prof, y_prof, xlabel, ylabel = profile
-    from app.model.shapes import SHAPES
 
     around = SHAPES.get(geo.wrinkles).closed
     size = np.ptp(X[:, :, 0]) if not around else max(np.ptp(X[:, :, 0]), np.ptp(X[:, :, 1]))
@@ -237,8 +238,6 @@ def modes_gallery(rows: list[dict], outdir, title: str, path) -> None:
     """The critical mode of every case: the normal mode displacement along an open surface, or the
     deformed passage outline of a tube."""
     import numpy as np
-
-    from app.model.shapes import along_profile, around_profile
 
     cases = [r for r in rows if (outdir / r["directory"] / "mode_surface.csv").is_file()]
     if not cases:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from dolfinx.io import XDMFFile
 
-from app.io import writes
+from app.io import hdf5, writes
 
 
 def rearrange(path: str | Path, name: str) -> int:
@@ -130,8 +130,6 @@ class FieldSeries:
         """Run the HDF5 ``actions`` on every rank, after reserving their space (unless ``data_bytes`` is
         None), and agree on the outcome of each before the next: a rank that failed must not leave the
         others inside the next one's collectives (measured: a hang when they agreed only after all)."""
-        from app.io import hdf5
-
         size0 = self.h5.stat().st_size if self.comm.rank == 0 and self.h5.is_file() else 0
         if data_bytes is not None:
             writes.reserve(self.comm, self.path.parent, self._need(data_bytes), self.h5, self.ballast,
@@ -157,8 +155,6 @@ class FieldSeries:
             self._grown = max(0, self.h5.stat().st_size - size0)
 
     def _abandon(self) -> None:
-        from app.io import hdf5
-
         if self._file is not None:
             hdf5.abandon(self._file)
             self._file = None

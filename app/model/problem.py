@@ -18,6 +18,7 @@ from petsc4py import PETSc
 
 from app import compat, fem_utils
 from app.geometry import GeometrySetup
+from app.model.barrier import BarrierContact
 from app.model.growth import GROWTH
 from app.model.kinematics import deformation_gradient, fluid_content
 from app.model.loading import BoundaryConditions, Loading
@@ -83,8 +84,6 @@ class Problem:
         """Add the traction-free surface's self-contact to Pi: the penalty (2D; interface stiffness kappa mu /
         h) or the barrier (2D and 3D; :mod:`app.model.barrier`)."""
         if energy == "barrier":
-            from app.model.barrier import BarrierContact
-
             self.contact = BarrierContact(self, kappa)
         else:
             self.contact = PenaltyContact(self, kappa)

@@ -42,7 +42,7 @@ class Criterion:
 
     def analyzer(self, problem, params: dict):
         """The :class:`app.solvers.stability.StabilityAnalyzer` of :meth:`operator`."""
-        from app.solvers.stability import StabilityAnalyzer
+        from app.solvers.stability import StabilityAnalyzer  # (lazy: the config schema reads this registry)
 
         return StabilityAnalyzer(self.operator(problem, params), problem.comm)
 

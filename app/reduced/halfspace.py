@@ -39,6 +39,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from app import compat, fem_utils
+from app.reduced.modes import BandAssembler, BandedPencil
 
 
 class HalfSpace:
@@ -93,7 +94,6 @@ class HalfSpace:
         order = np.lexsort((field[keep], coords[keep]))
         self.dofs = index[keep][order]
         self.n = len(self.dofs)
-        from app.reduced.modes import BandAssembler
 
         self._assembler = BandAssembler(self.form, self.dofs)
 
@@ -136,8 +136,6 @@ class HalfSpace:
 
     def margin_along(self, F, s: float) -> float:
         """The margin for a wave along the frame's first axis only."""
-        from app.reduced.modes import BandedPencil
-
         return BandedPencil([self.band(F, s), 0.0, 0.0]).margin(0.0)
 
     def margin(self, F, s: float) -> float:

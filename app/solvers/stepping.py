@@ -19,6 +19,7 @@ import numpy as np
 from mpi4py import MPI
 
 from app import fem_utils
+from app.solvers.minimizer import MinimizingNewton, energy_decreased
 from app.solvers.newton import NewtonResult, NewtonSolver, SolverSettings
 from app.solvers.step_control import TimeSettings
 from app.solvers.stepped_problem import LostStability, Snapshot, StepFailure, SteppedProblem, StepRecord
@@ -78,7 +79,6 @@ class TimeStepper:
         an onset. Newton's counters carry over; the run also checks for self-contact and inverted cells."""
         if self.minimizing:
             return
-        from app.solvers.minimizer import MinimizingNewton
 
         s, old = self.system, self.solver
         self.solver = MinimizingNewton(s.energy, s.residual, s.hessian, s.bcs, s.w, self._solver_settings, s.comm,
@@ -205,8 +205,6 @@ class TimeStepper:
             dQ_pred = self._predict(dt, extrapolate=False)
         res = self.solver.solve()
         if res.converged and self.minimizing:
-            from app.solvers.minimizer import energy_decreased
-
             if not energy_decreased(self.solver.last):
                 self.energy_rejections += 1
                 res = NewtonResult(False, res.iterations, ENERGY_INCREASED, res.residual_norm)

@@ -43,14 +43,18 @@ import time
 from pathlib import Path
 
 from app import config, interrupt, logging_setup, timing
+from app.io import lock, writes
+from app.workflows import error_estimate as ee
+from app.workflows import preflight
 from app.workflows.bench_report import BASELINE, fits, report, table
+from app.workflows.error_estimate import companion_error_estimate
+from app.workflows.run import simulate
+from app.workflows.variants import variant
 
 SIZES = {"coarse": 2.0, "default": 1.0, "fine": 0.7, "finer": 0.5}  # element size x s, film layers / s
 
 
 def size_config(name: str, overrides: list[str]) -> dict:
-    from app.workflows.variants import variant
-
     scale = SIZES[name]
     cfg = config.resolve({}, list(overrides))
     return variant(cfg, {"mesh.element_size": cfg["mesh"]["element_size"] * scale,
@@ -61,8 +65,6 @@ def size_config(name: str, overrides: list[str]) -> dict:
 
 def bench_one(cfg: dict, comm, outdir: Path, estimate: str | None = None) -> dict | None:
     """One size's timings; with ``estimate`` ("current" or "baseline") also its error estimate's."""
-    from app.workflows.run import simulate
-
     timing.reset()
     per_run = reset_peak_memory()
     t0 = time.perf_counter()
@@ -119,8 +121,6 @@ def bench_one(cfg: dict, comm, outdir: Path, estimate: str | None = None) -> dic
 
 def time_estimate(cfg: dict, g: float, comm, outdir: Path, which: str, run_wall: float) -> dict:
     """The wall time of the run's error estimate (``which``: "current" or "baseline") and its bars."""
-    from app.workflows.error_estimate import companion_error_estimate
-
     t0 = time.perf_counter()
     est = (companion_error_estimate if which == "current" else estimate_before)(cfg, g, outdir, comm, progress=False)
     wall = time.perf_counter() - t0
@@ -131,8 +131,6 @@ def time_estimate(cfg: dict, g: float, comm, outdir: Path, which: str, run_wall:
 def estimate_before(cfg: dict, g: float, outdir: Path, comm, progress: bool = False) -> dict:
     """The error estimate as it was before (the baseline of ``--error-estimate``): the time companion on the
     run's own mesh, then the mesh companion, one after the other on all ranks (into error-estimate-before)."""
-    from app.workflows import error_estimate as ee
-
     log, out = logging_setup.get(), {}
     plans = {study: ee.companion_plan(cfg, study, out, log) for study in ("time", "mesh")}
     done = ee.side_by_side({study: p[0] for study, p in plans.items() if p is not None}, outdir, comm, progress,
@@ -239,8 +237,6 @@ def _launch(k: int, sizes: list[str], overrides: list[str], outdir: Path, extra:
     """One ``mpirun -n k ... bench --json-only``: its result, None once interrupted; BenchFailed if it failed."""
     from mpi4py import MPI
 
-    from app.io import lock
-
     if interrupt.pending(MPI.COMM_SELF):
         return None
     with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
@@ -296,8 +292,6 @@ def parse_ranks(text: str | None, comm) -> list[int] | None:
 
 def check(sizes: list[str], overrides: list[str], outdir, comm) -> None:
     """The pre-flight of every size's config (app.workflows.preflight), then the directory claimed."""
-    from app.workflows import preflight
-
     size_cfgs = [size_config(name, overrides) for name in sizes]
     for cfg, name in zip(size_cfgs, sizes):
         preflight.mesh_size(cfg, False, f"bench size {name}")
@@ -311,8 +305,6 @@ def command(sizes: list[str], ranks: list[int] | None, overrides: list[str], out
     returns the table (rank 0; '' elsewhere and for a ``--json-only`` launch), or None when interrupted (no
     bench.json: timings of a part of a run are no benchmark). A stale bench.json/bench.md goes first: a
     directory holds them only once a bench has ended. Raises BenchFailed and ResultWriteError."""
-    from app.io import writes
-
     def clear():
         for name in ("bench.json", "bench.md"):
             (outdir / name).unlink(missing_ok=True)

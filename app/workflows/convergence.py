@@ -26,8 +26,10 @@ import math
 import time
 from pathlib import Path
 
-from app import config, interrupt, logging_setup
-from app.workflows import progress, reruns
+from app import config, geometry, interrupt, logging_setup
+from app.io import writes
+from app.io.checkpoint import CheckpointError
+from app.workflows import preflight, progress, reruns
 from app.workflows.run import simulate
 from app.workflows.variants import variant
 
@@ -92,8 +94,6 @@ def refined_configs(cfg: dict, study: str, levels: int, time_factor: float = TIM
                 changes.update({"time.dt_initial": dt, "time.dt_min": min(cfg["time"]["dt_min"], dt),
                                 "time.dt_max": max(cfg["time"]["dt_max"], dt)})
         else:
-            from app import geometry
-
             g = config.geometry_input(cfg)
             value, more = geometry.kind_of(g).refined(g, e, mesh_factor)
             changes.update(more)
@@ -104,8 +104,6 @@ def refined_configs(cfg: dict, study: str, levels: int, time_factor: float = TIM
 def check(cfg: dict, levels: int, studies, coarsen: bool) -> None:
     """``converge``'s own input: the level count, the stability test on, every level's mesh within the size
     limit (a ConfigError naming the key otherwise)."""
-    from app.workflows import preflight
-
     if not 2 <= levels <= 6:
         raise config.ConfigError("--levels", f"= {levels} is out of range; allowed: 2..6")
     if not cfg["stability"]["enabled"]:
@@ -118,8 +116,6 @@ def check(cfg: dict, levels: int, studies, coarsen: bool) -> None:
 def _level(c: dict, d: Path, comm, label: str, force: bool, log) -> tuple[dict, bool]:
     """One level's summary: kept from an earlier converge (finished, the same config), resumed from its
     checkpoint, or run; and whether it was kept."""
-    from app.io.checkpoint import CheckpointError
-
     if not force:
         done = comm.bcast(reruns.finished(c, d) if comm.rank == 0 else None, root=0)
         if done is not None:
@@ -138,8 +134,6 @@ def _level(c: dict, d: Path, comm, label: str, force: bool, log) -> tuple[dict, 
 def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"), time_factor: float = TIME_FACTOR,
              mesh_factor: float = MESH_FACTOR, coarsen: bool = False, force: bool = False) -> dict:
     """Run the refinement studies; write convergence.csv/.json/.md/.png; return the report."""
-    from app.io import writes
-
     plans = {study: refined_configs(cfg, study, levels, time_factor, mesh_factor, coarsen) for study in studies}
     log = logging_setup.get()
     outdir = Path(outdir)
@@ -225,7 +219,6 @@ def converge(cfg: dict, outdir, comm, levels: int = 3, studies=("time", "mesh"),
 
 def _write(outdir: Path, rows: list[dict], report: dict) -> None:
     """Rank 0: the tables, each written aside and renamed (a failure names its file)."""
-    from app.io import writes
     from app.io.plots import convergence_plot
 
     def table(tmp):

@@ -24,6 +24,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from app import config, geometry, interrupt, logging_setup
+from app.io.writes import ResultWriteError
+from app.workflows.convergence import refined_configs
+from app.workflows.run import simulate
+from app.workflows.variants import variant
 
 # Orders assumed by the single-run error estimate (measured in docs/validation.md: time ~1.2,
 # mesh ~1.8 on the default bilayer); the lower values make the estimate conservative.
@@ -35,8 +39,6 @@ RUN_MESH_TIME = "time-run-mesh"  # the directory of a time companion on the run'
 def companion_config(cfg: dict, study: str) -> tuple[dict, str]:
     """The companion's config and its direction ("coarsened" or "refined"): coarsened by 2 where the
     config allows it, else (mesh only) refined by 2; ConfigError if neither exists."""
-    from app.workflows.convergence import refined_configs
-
     try:
         return refined_configs(cfg, study, 2, coarsen=True)[1][2], "coarsened"
     except config.ConfigError:
@@ -88,8 +90,6 @@ def companion_error_estimate(cfg: dict, g_c_um: float, outdir, comm, progress: b
 
 def companion_plan(base: dict, study: str, out: dict, log):
     """(companion config, direction) of ``base`` in ``study``; None (its part noted in ``out``) if none."""
-    from app.workflows.variants import variant
-
     try:
         c, direction = companion_config(base, study)
     except config.ConfigError as err:
@@ -129,9 +129,6 @@ def side_by_side(jobs: dict, outdir, comm, progress: bool = True, together: bool
     directories), else one after the other on all ranks. A result file that cannot be written in any group
     is raised on every rank (:class:`~app.io.writes.ResultWriteError`) once every group has ended; any other
     failure of a companion becomes its note."""
-    from app.io.writes import ResultWriteError
-    from app.workflows.run import simulate
-
     studies = list(jobs)
     if not studies:
         return {}

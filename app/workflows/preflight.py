@@ -8,7 +8,9 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from app import config
+from app import config, geometry
+from app.geometry.base import MAX_CELLS, size_line
+from app.io import checkpoint, lock
 
 
 def check(cfgs: list[dict], comm, outdir, labels: list[str] | None = None, force: bool = False,
@@ -40,9 +42,6 @@ def mesh_size(cfg: dict, force: bool, label: str | None = None) -> dict | None:
     """The kind's mesh size estimate (None for a user's file); above the limit a ConfigError naming
     mesh.element_size, unless ``force`` (an absurd element size would hang inside gmsh). ``label``: the
     case of a command that runs several (study, sweep, converge, bench), which have no --force for it."""
-    from app import geometry
-    from app.geometry.base import MAX_CELLS, size_line
-
     g = config.geometry_input(cfg)
     est = geometry.kind_of(g).estimate(g)
     if est is not None and est["cells"] > MAX_CELLS and not force:
@@ -57,8 +56,6 @@ def mesh_size(cfg: dict, force: bool, label: str | None = None) -> dict | None:
 def geometry_inputs(cfgs, comm, labels=None) -> None:
     """Input errors only a geometry's files can show (a user .msh: missing, unreadable, groups the
     config names but the file lacks), as ConfigError before any result directory exists."""
-    from app import geometry
-
     seen = set()
     for i, cfg in enumerate(cfgs):
         key = repr(sorted(cfg["geometry"].items()))
@@ -85,8 +82,6 @@ def check_output(path, comm) -> None:
 def take_output(path, comm) -> None:
     """:func:`check_output`, then the directory is claimed for this job (:mod:`app.io.lock`; it is created
     then): refused if another live job holds it, a directory around it or one inside it."""
-    from app.io import lock
-
     check_output(path, comm)
     lock.claim(path, comm)
 
@@ -113,8 +108,6 @@ def resume(resume_dir, output, cfg: dict, comm):
     """``run --resume DIR``: (DIR, its checkpoint) when ``cfg`` may continue it; a ConfigError for a
     different -o/--output, a live job holding DIR; a CheckpointError for a checkpoint that cannot be read
     or a result-changing key changed."""
-    from app.io import checkpoint, lock
-
     if output and Path(output).absolute() != Path(resume_dir).absolute():
         raise config.ConfigError("", f"--resume '{resume_dir}' continues in that directory: leave out "
                                  f"-o/--output '{output}'")

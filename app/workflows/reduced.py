@@ -12,9 +12,9 @@ import csv
 import time
 from pathlib import Path
 
-from app import config, factory, logging_setup
+from app import config, factory, interrupt, logging_setup
 from app.io import writes
-from app.reduced.solve import Estimate, Interrupted, Settings
+from app.reduced.solve import Estimate, Interrupted, Settings, converged
 from app.reduced.transient import Resolution, TransientFailed
 
 SOLVER = "reduced-1d"
@@ -88,8 +88,6 @@ ISOMODES = 12  # earliest mode crossings a study row lists (its isomode curves)
 def compute(cfg: dict, stop=None) -> dict:
     """The converged reduced answer of ``cfg`` as a summary block; NotReducible if it has none,
     TransientFailed if the 1D transient cannot be continued, Interrupted once ``stop()`` is true."""
-    from app.reduced.solve import converged
-
     st = settings(cfg)
     t0 = time.perf_counter()
     section = factory.section(cfg)
@@ -128,8 +126,6 @@ def add_reduced(summary: dict, cfg: dict, comm) -> None:
     """Pipeline step: a bilayer or circular-tube run's exact 1D counterpart, in ``summary["reduced"]``
     (not after an interrupted or failed run). A SIGINT/SIGTERM while it is computed ends it: the run's
     summary is written without it (``reduced.kind = "interrupted"``) and the command exits 130/143."""
-    from app import interrupt
-
     if summary["status"] in ("interrupted", "failed"):
         return
     log = logging_setup.get()
@@ -276,8 +272,6 @@ def _write_history(path: Path, est: Estimate) -> None:
 def command(cfg: dict, outdir: Path, comm) -> int:
     """``hydrobuckle reduced``: the exit code (0; 1 when the 1D transient failed, summary.json saying so; the
     code of a signal, agreed by every rank). A 1D problem: rank 0 computes, the others wait."""
-    from app import interrupt
-
     log = logging_setup.get()
     code = 0
     with interrupt.Watch(comm):

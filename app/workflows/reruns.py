@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 
 from app import config
+from app.io import checkpoint
 
 COMPLETE = ("buckled", "stable", "equilibrium")  # statuses of a finished run (a rerun keeps it)
 
@@ -50,8 +51,6 @@ def finished(cfg: dict, outdir, solver: str = "2d") -> dict | None:
 def resumable(cfg: dict, outdir, comm, log, label: str):
     """The checkpoint in ``outdir`` if ``cfg`` may resume it (collective), else None; a checkpoint of
     another config is logged (``label``: the command and case) and the run starts anew."""
-    from app.io import checkpoint
-
     has = comm.bcast((Path(outdir) / checkpoint.FILE).is_file() if comm.rank == 0 else None, root=0)
     if not has:
         return None

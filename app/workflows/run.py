@@ -15,8 +15,8 @@ from app.io import checkpoint
 from app.io.output import OutputSettings, ResultWriter, versions
 from app.io.writes import ResultWriteError
 from app.model import history
-from app.model.problem import Problem
 from app.model.patterns import branch_patterns
+from app.model.problem import Problem
 from app.model.surface import SurfaceProfiles, shape_of, surface_profile
 from app.onset.contact import contact_summary
 from app.onset.tracker import StabilitySettings, onset_tracker

@@ -18,8 +18,14 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from app import config, interrupt, logging_setup
-from app.workflows import progress
+from app import config, geometry, interrupt, logging_setup
+from app.io import writes
+from app.io.checkpoint import CheckpointError
+from app.io.writes import ResultWriteError
+from app.reduced.solve import Interrupted
+from app.reduced.transient import TransientFailed
+from app.workflows import preflight, progress, reduced
+from app.workflows.pipeline import run_case
 from app.workflows.reruns import COMPLETE, finished, resumable  # noqa: F401 - COMPLETE: read by the CLI
 from app.workflows.variants import variant
 
@@ -115,8 +121,6 @@ def build_cases(base_cfg_user: dict, param: str, values: list, outdir: Path, ove
             changes = {"stability.error_estimate": error_estimate}
             if scale_mesh_with_film and param == "geometry.film_thickness":
                 # keep film elements' shape: element length along the film <= f w, f the kind's (bilayer 0.4, tubes 0.5)
-                from app import geometry
-
                 f = geometry.kind_of(cfg["geometry"]["kind"]).film_element_fraction
                 if f is not None:
                     changes["mesh.element_size"] = min(cfg["mesh"]["element_size"], f * v)
@@ -141,10 +145,6 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
     it has not started are left without a directory. A result file that cannot be written (a full
     disk) stops its group the same way, and then every rank raises that
     :class:`~app.io.writes.ResultWriteError` (the first group's, in rank order)."""
-    from app.io.checkpoint import CheckpointError
-    from app.io.writes import ResultWriteError
-    from app.workflows.pipeline import run_case
-
     log = logging_setup.get()
     k = 1 if solver == "reduced" else max(1, min(ranks_per_case, comm.size))
     n_groups = comm.size // k
@@ -221,10 +221,6 @@ def run_cases(cases: list[Case], comm, ranks_per_case: int = 1, force: bool = Fa
 def _run_reduced(case: Case, log) -> None:
     """One case's exact 1D reduction into its directory (summary.json last); a transient that fails leaves
     error.txt and a failed summary, the other cases go on."""
-    from app.reduced.solve import Interrupted
-    from app.reduced.transient import TransientFailed
-    from app.workflows import reduced
-
     try:
         reduced.run(case.cfg, case.outdir, stop=lambda: interrupt._received != 0)
     except Interrupted:
@@ -285,7 +281,6 @@ def _reduced_row(s: dict) -> dict:
 def write_tables(rows: list[dict], outdir: Path, title: str, param: str) -> None:
     """Rank 0: study.csv, study.png, modes.png (and isomodes.png), each written aside and renamed; a
     failure names its file (a :class:`~app.io.writes.ResultWriteError`)."""
-    from app.io import writes
     from app.io.plots import isomode_plot, modes_gallery, numeric, study_plot
 
     writes.at(outdir, outdir.mkdir, parents=True, exist_ok=True)
@@ -307,8 +302,6 @@ def write_tables(rows: list[dict], outdir: Path, title: str, param: str) -> None
 
 def run_study(cases: list[Case], outdir: Path, comm, title: str, param: str, ranks_per_case: int = 1,
               force: bool = False, solver: str = "2d") -> list[dict]:
-    from app.io import writes
-
     run_cases(cases, comm, ranks_per_case, force, solver)
     rows = collect(cases, param) if comm.rank == 0 else None
 
@@ -370,8 +363,6 @@ def command(cases: list[Case], outdir: Path, comm, title: str, param: str, ranks
             reduced: bool, start) -> tuple[bool, str]:
     """``hydrobuckle study`` and ``sweep``: the shared pre-flight of every case, ``start()`` (the command's
     logging), every case, the tables; whether every case is complete and the line saying so."""
-    from app.workflows import preflight
-
     preflight.check([c.cfg for c in cases], comm, outdir, [c.label for c in cases], reduced=reduced,
                     ranks_per_case=ranks_per_case)
     start()

@@ -14,7 +14,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from app import config
+from app import config, factory
+from app.reduced.solve import compile_forms
+from app.workflows.reduced import settings
+from app.workflows.run import simulate
 
 # (label, user config): each differs from the others in at least one compiled form
 CASES = (
@@ -41,8 +44,6 @@ def _merge(a: dict, b: dict) -> dict:
 
 def warmup(comm, log=print) -> float:
     """Run every case of :data:`CASES` for two tiny steps; return the wall time [s]."""
-    from app.workflows.run import simulate
-
     t0 = time.perf_counter()
     tmp = tempfile.mkdtemp(prefix="hydrobuckle-warmup-") if comm.rank == 0 else None
     tmp = comm.bcast(tmp, root=0)
@@ -52,9 +53,6 @@ def warmup(comm, log=print) -> float:
         simulate(cfg, Path(tmp) / label.split()[0], comm, progress=False)
         log(f"warmup: {label} forms ready ({time.perf_counter() - t:.1f} s)")
     if comm.rank == 0:  # the 1D reduction's forms (the 2D run's counterpart and `hydrobuckle reduced`)
-        from app import factory
-        from app.reduced.solve import compile_forms
-        from app.workflows.reduced import settings
 
         for label, user in (("bilayer", {}), ("tube", {"geometry": {"kind": "tube"}})):
             t = time.perf_counter()
