@@ -105,11 +105,6 @@ def vector_space(domain, family: str, degree: int):
     return _space(domain, _element(family, domain.ufl_cell(), degree, shape=(_gdim(domain),)))
 
 
-def rtcf_space(domain):
-    """The flux space alone (lowest-order Raviart-Thomas on the mesh's cells)."""
-    return _space(domain, _raviart_thomas(domain.ufl_cell()))
-
-
 # --- dofmaps, vectors, meshes, lifting, expressions ----------------------------------------
 
 

@@ -68,7 +68,7 @@ def test_mixed_rtcf_matches_plain_rtcf(comm):
     w = fem.Function(W)
     w.sub(1).interpolate(_field)
     w.x.scatter_forward()
-    V = compat.rtcf_space(domain)
+    V = compat.scalar_space(domain, "RTCF", 1)
     q = fem.Function(V)
     q.interpolate(_field)
     _, Qm = ufl.split(w)
@@ -92,7 +92,7 @@ def test_mixed_rtcf_matches_plain_rtcf(comm):
     errs = []
     for nref in (4, 8, 16):
         d = distorted_mesh(comm, nref)
-        Vr = compat.rtcf_space(d)
+        Vr = compat.scalar_space(d, "RTCF", 1)
         qr = fem.Function(Vr)
         qr.interpolate(_field)
         x = ufl.SpatialCoordinate(d)

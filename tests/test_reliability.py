@@ -15,7 +15,7 @@ from cases import swelling_case
 
 from app import config, factory
 from app.model.theory import constrained_layer_stretch
-from app.onset.criteria import rate_matrix
+from app.onset.criteria import CRITERIA
 from app.solvers import newton, stepping
 from app.solvers.stepped_problem import StepFailure
 from app.workflows.run import simulate
@@ -126,7 +126,7 @@ def test_failing_steps_past_the_onset_are_diagnosed_not_cut_to_dt_min(comm, shar
 
     def spy(self, dt, reason, failures):
         counts["failures"], counts["t"], counts["tau"] = failures, self.t, dt
-        analyzer = rate_matrix(self.check.problem, dt)
+        analyzer = CRITERIA.get("rate").analyzer(self.check.problem, {"tau": dt})
         counts["nneg"] = analyzer.inertia()[0]
         analyzer.destroy()
         real(self, dt, reason, failures)

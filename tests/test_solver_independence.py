@@ -7,7 +7,7 @@ from conftest import run_to_end, small_bilayer
 from dolfinx.fem import petsc as fem_petsc
 
 from app import fem_utils
-from app.onset.criteria import rate_matrix
+from app.onset.criteria import CRITERIA
 
 
 def _form_signature(compiled) -> str:
@@ -21,7 +21,7 @@ def test_analyzer_k_is_the_problems_k_and_leaves_the_problem_alone(comm):
     cfg = small_bilayer(**{"time.end": 0.05, "stability.enabled": "false"})
     p, _, _ = run_to_end(cfg, comm)  # a state with displacement and fluid
     tau = 0.01
-    analyzer = rate_matrix(p, tau)
+    analyzer = CRITERIA.get("rate").analyzer(p, {"tau": tau})
     # the coefficients are the analyzer's own, the compiled kernel the problem's (no second JIT compile)
     assert _form_signature(analyzer.op.k.form) == _form_signature(p.forms.hessian)
     w, step_tau = p.w.x.array.copy(), float(p.tau.value)

@@ -125,11 +125,6 @@ def _hessian(problem, tau: float, keep=None):
     return HessianOperator(zero_increment_hessian(problem, tau), problem.comm, keep=keep)
 
 
-def rate_matrix(problem, tau: float):
-    """The analyzer of K with the step tau on the free dofs (criterion "rate" with that tau)."""
-    return CRITERIA.get("rate").analyzer(problem, {"tau": tau})
-
-
 class LossOfStability:
     """The time stepper's diagnosis after a step failed twice in a row for the same reason
     (:meth:`app.solvers.stepping.TimeStepper._diagnose`): ``check(dt)`` tests the converged state with the
