@@ -52,11 +52,20 @@ def _override_list(overrides: Overrides) -> list[str]:
 
 
 def load_config(path: str | Path | None = None, overrides: Overrides = None) -> dict:
-    """A resolved, validated config: the TOML file at ``path`` (None: every key at its default) with
-    ``overrides`` applied, as ``--set`` does (a mapping of dotted keys to values, or ``"KEY=VALUE"``
-    strings). Every key of the schema is present in the result (the reference's Configuration page lists
-    them). Raises :class:`ConfigError` naming the key for an unknown key, a wrong type or a value out of
-    range."""
+    """A resolved, validated config, as the command line reads one.
+
+    Args:
+        path: the TOML file; None: every key at its default.
+        overrides: applied as ``--set`` does: a mapping of dotted keys to values, ``"KEY=VALUE"`` strings, or
+            one such string.
+
+    Returns:
+        The config as nested dicts, every key of the schema present (the reference's Configuration page
+        lists them), the geometry kind's own defaults applied.
+
+    Raises:
+        ConfigError: an unknown key, a wrong type or a value out of range, naming the key.
+    """
     if path is None:
         return config.resolve({}, _override_list(overrides))
     return config.load(path, _override_list(overrides))
@@ -218,7 +227,14 @@ class Result:
 
 
 def load_result(outdir: str | Path) -> Result:
-    """The result a finished run, or ``hydrobuckle run``, wrote into ``outdir``."""
+    """The result a finished run, or ``hydrobuckle run``, wrote into a directory.
+
+    Args:
+        outdir: the result directory (its summary.json, history.csv and the other files).
+
+    Returns:
+        The :class:`Result` read back.
+    """
     return Result.load(outdir)
 
 
@@ -227,15 +243,24 @@ def run(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False, force: 
     directory), the simulation to its onset (or past it, as the config says), its error estimate and its
     exact 1D counterpart where the config asks for them; everything written into ``outdir``.
 
-    ``cfg``: a resolved config (:func:`load_config`; change ``geometry.kind`` through its overrides, not in
-    the dict, so that the new kind's defaults apply). ``comm``: the communicator to run on (default
-    ``MPI.COMM_WORLD``). ``verbose``: the progress lines (one per step) on rank 0. ``force``: accept a mesh
-    above the size limit.
+    Args:
+        cfg: a resolved config (:func:`load_config`; change ``geometry.kind`` through its overrides, not in
+            the dict, so that the new kind's defaults apply). It is validated again.
+        outdir: the result directory to write.
+        comm: the communicator to run on (default ``MPI.COMM_WORLD``); call on every rank.
+        verbose: the progress lines (one per step) on rank 0.
+        force: accept a mesh above the size limit.
 
-    Raises :class:`ConfigError` for bad input (nothing written), ``app.io.writes.ResultWriteError`` when a
-    result file cannot be written (what was written is kept), and KeyboardInterrupt after a SIGINT or
-    SIGTERM once the run has stopped and saved its state (``hydrobuckle run --resume`` continues it). A
-    solver failure is not an exception: the Result's ``status`` is ``"failed"``, everything computed kept."""
+    Returns:
+        The :class:`Result` of ``outdir``, the same on every rank. A solver failure is not an exception: its
+        ``status`` is ``"failed"``, everything computed kept.
+
+    Raises:
+        ConfigError: bad input; nothing is written.
+        app.io.writes.ResultWriteError: a result file could not be written; what was written is kept.
+        KeyboardInterrupt: after a SIGINT or SIGTERM, once the run has stopped and saved its state
+            (``hydrobuckle run --resume`` continues it).
+    """
     from app import interrupt
     from app.workflows import preflight
     from app.workflows.pipeline import run_case
@@ -256,8 +281,19 @@ def run(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False, force: 
 def run_reduced(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False) -> Result:
     """The exact 1D reduction of a bilayer or circular tube, as ``hydrobuckle reduced``: g_c and N_c
     converged in 1D mesh and time with an error bar, the margin curve (``margin.csv``) in ``outdir``.
-    Rank 0 computes; every rank returns the result. Raises :class:`ConfigError` for a config the reduction
-    does not cover."""
+
+    Args:
+        cfg: a resolved config (:func:`load_config`).
+        outdir: the result directory to write.
+        comm: the communicator (default ``MPI.COMM_WORLD``); rank 0 computes.
+        verbose: the progress lines on rank 0.
+
+    Returns:
+        The :class:`Result` of ``outdir`` on every rank (``solver`` is ``"reduced-1d"``).
+
+    Raises:
+        ConfigError: a config the reduction does not cover, naming the key that decides it.
+    """
     from app import interrupt
     from app.workflows import preflight
     from app.workflows import reduced as reduced_workflow
@@ -333,10 +369,28 @@ def _values(values) -> str | None:
 def study(name: str, outdir: str | Path, values: Sequence | None = None, overrides: Overrides = None, comm=None,
           reduced: bool = False, error_estimate: bool = False, ranks_per_case: int = 1, force: bool = False,
           verbose: bool = False) -> Study:
-    """One of the paper's parameter studies, as ``hydrobuckle study NAME`` (``studies()`` names them):
-    every case in its own subdirectory of ``outdir``, then study.csv/.json/.png. ``values`` replaces the
-    study's own values; ``reduced`` computes every case by the exact 1D reduction (seconds a case).
-    Resumable: a case already complete with the same config is not run again (``force``: all anew)."""
+    """One of the paper's parameter studies, as ``hydrobuckle study NAME``: every case in its own
+    subdirectory of ``outdir``, then study.csv/.json/.png. Resumable: a case already complete with the same
+    config is not run again.
+
+    Args:
+        name: the study (:func:`studies` names them).
+        outdir: the study directory.
+        values: replaces the study's own values of its key.
+        overrides: config changes for every case, as in :func:`load_config`.
+        comm: the communicator (default ``MPI.COMM_WORLD``); cases run side by side on its ranks.
+        reduced: every case by the exact 1D reduction (seconds a case).
+        error_estimate: every case with its error bar (``stability.error_estimate``).
+        ranks_per_case: MPI ranks per case.
+        force: run every case anew.
+        verbose: the progress lines.
+
+    Returns:
+        The :class:`Study`: its rows and each case's :class:`Result`.
+
+    Raises:
+        ConfigError: an unknown study or a value out of its key's range; nothing is written.
+    """
     from app.workflows import studies as st
 
     outdir = Path(outdir)
@@ -348,8 +402,21 @@ def study(name: str, outdir: str | Path, values: Sequence | None = None, overrid
 def sweep(config_path: str | Path, param: str, values: Sequence, outdir: str | Path, overrides: Overrides = None,
           comm=None, reduced: bool = False, error_estimate: bool = False, ranks_per_case: int = 1,
           force: bool = False, verbose: bool = False) -> Study:
-    """A sweep of any key ``param`` of the config file ``config_path`` over ``values``, as ``hydrobuckle
-    sweep``."""
+    """A sweep of any key of a config file over values, as ``hydrobuckle sweep``.
+
+    Args:
+        config_path: the TOML config every case starts from.
+        param: the dotted key to sweep, e.g. ``"material.film.modulus_ratio"``.
+        values: its values, one case each.
+        outdir: the study directory.
+        overrides, comm, reduced, error_estimate, ranks_per_case, force, verbose: as in :func:`study`.
+
+    Returns:
+        The :class:`Study`.
+
+    Raises:
+        ConfigError: an unknown key, or a value a case's config cannot take; nothing is written.
+    """
     from app.workflows import studies as st
 
     outdir = Path(outdir)
@@ -360,7 +427,11 @@ def sweep(config_path: str | Path, param: str, values: Sequence, outdir: str | P
 
 
 def studies() -> dict[str, str]:
-    """The paper's studies by name, each with its description."""
+    """The paper's studies.
+
+    Returns:
+        Each study's name (for :func:`study`) with its description.
+    """
     from app.workflows.studies import STUDIES
 
     return {name: spec.description for name, spec in STUDIES.items()}
