@@ -509,9 +509,9 @@ def test_the_contact_surface_is_numbered_alike_on_any_number_of_ranks():
     backwards.facets_of = lambda groups: facets_of(groups)[::-1]
     for p in (here, alone, backwards):
         p.enable_contact(1000.0)
-    a = here.contact.penalty
+    a = here.contact.term
     assert len(a.X) == 21  # the top of a 0.2 mm strip with 0.01 mm elements
-    for b in (alone.contact.penalty, backwards.contact.penalty):
+    for b in (alone.contact.term, backwards.contact.term):
         assert np.array_equal(a.X, b.X) and np.array_equal(a.segments, b.segments)
     mids = a.X[a.segments].mean(axis=1)  # the reference geometry's order: the top's segments in increasing x
     assert np.all(np.diff(mids[:, 0]) > 0)

@@ -29,7 +29,7 @@ def test_time_error_on_the_coarse_mesh_and_mesh_error_against_the_run(monkeypatc
     cfg = swelling_case("mesh.element_size=0.01", "mesh.film_layers=2")
     h, tol = 0.01, cfg["time"]["tolerance"]
     simulate, calls = _fake({(2 * h, tol): 7.0, (2 * h, 4 * tol): 6.9})
-    monkeypatch.setattr("app.workflows.run.simulate", simulate)
+    monkeypatch.setattr(ee, "simulate", simulate)
     out = ee.companion_error_estimate(cfg, 6.8, "/tmp/unused", MPI.COMM_WORLD)
     assert out["time_companion_mesh"] == "coarsened"
     assert out["mesh_um"] == pytest.approx(0.2 / (2 ** 1.5 - 1), rel=1e-12)
@@ -44,7 +44,7 @@ def test_no_coarse_answer_runs_the_time_companion_on_the_run_mesh(monkeypatch):
     cfg = swelling_case("mesh.element_size=0.01", "mesh.film_layers=2")
     h, tol = 0.01, cfg["time"]["tolerance"]
     simulate, calls = _fake({(h, 4 * tol): 6.75})  # the coarse mesh finds no onset
-    monkeypatch.setattr("app.workflows.run.simulate", simulate)
+    monkeypatch.setattr(ee, "simulate", simulate)
     out = ee.companion_error_estimate(cfg, 6.8, "/tmp/unused", MPI.COMM_WORLD)
     assert out["mesh_um"] is None and "no onset" in out["mesh_note"]
     assert out["time_companion_mesh"] == "the run's"
@@ -61,7 +61,7 @@ def test_a_failing_companion_costs_its_part_only(monkeypatch):
             raise RuntimeError("the solver broke")
         return {"status": "buckled", "critical": {"growth_um": 7.0}}
 
-    monkeypatch.setattr("app.workflows.run.simulate", simulate)
+    monkeypatch.setattr(ee, "simulate", simulate)
     out = ee.companion_error_estimate(cfg, 6.8, "/tmp/unused", MPI.COMM_WORLD)
     assert out["mesh_um"] == pytest.approx(0.2 / (2 ** 1.5 - 1), rel=1e-12)
     assert out["time_um"] is None and "RuntimeError: the solver broke" in out["time_note"]
@@ -76,7 +76,7 @@ def test_side_by_side_gives_every_rank_every_answer(monkeypatch):
         seen.append((outdir.name, comm.size))
         return {"status": "buckled", "critical": {"growth_um": 1.0 if outdir.name == "mesh" else 2.0}}
 
-    monkeypatch.setattr("app.workflows.run.simulate", simulate)
+    monkeypatch.setattr(ee, "simulate", simulate)
     cfg = swelling_case()
     done = ee.side_by_side({"mesh": cfg, "time": cfg}, "/tmp/unused", MPI.COMM_WORLD)
     assert done == {"mesh": {"g": 1.0}, "time": {"g": 2.0}}

@@ -6,18 +6,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from app.geometry.base import (
-    CrossSection,
-    Drive,
-    GeometryInput,
-    GeometryKind,
-    GeometrySetup,
-    base_key,
-    base_role,
-    layer_keys,
-    planar_cross_section,
-    structured_size,
-)
+from app.geometry.base import (CrossSection, Drive, GeometryInput, GeometryKind, GeometrySetup, base_key, base_role,
+                                layer_keys, planar_cross_section, structured_size)
 from app.schema import ConfigError, gt, key
 
 if TYPE_CHECKING:

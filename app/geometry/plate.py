@@ -8,19 +8,8 @@ plate's too, with a mode exp(i k.x) critical where |k| meets the 1D margin curve
 
 from __future__ import annotations
 
-from app.geometry.base import (
-    MEMORY_BASE_MB,
-    MEMORY_PER_DOF_KB,
-    CrossSection,
-    Drive,
-    GeometryInput,
-    GeometryKind,
-    GeometrySetup,
-    base_key,
-    base_role,
-    layer_keys,
-    planar_cross_section,
-)
+from app.geometry.base import (MEMORY_BASE_MB, MEMORY_PER_DOF_KB, CrossSection, Drive, GeometryInput, GeometryKind,
+                                GeometrySetup, base_key, base_role, layer_keys, planar_cross_section)
 from app.schema import ConfigError, gt, key
 
 

@@ -215,7 +215,7 @@ class BarrierContact(GatheredSurface):
             centres, faces = split(self.facets, self.X)
             edges = _ipctk().edges(faces.astype(np.int32))
         try:
-            self.barrier = Barrier(self.X, edges, faces, self.kappa * self._mu, centres=centres)
+            self.term = Barrier(self.X, edges, faces, self.kappa * self._mu, centres=centres)
         except ValueError as err:
             raise ValueError(f"stability.contact_energy = 'barrier': {err}; allowed there: 'penalty' (2D)") from err
 
@@ -226,24 +226,17 @@ class BarrierContact(GatheredSurface):
         ordered = [Facet(*map(list, zip(*sorted(zip(f.dofs, f.points), key=lambda dp: dp[1])))) for f in facets]
         return sorted(ordered, key=lambda f: f.points)
 
-    def set_kappa(self, kappa: float) -> None:
-        self.kappa = float(kappa)
-        self.barrier.stiffness = self.kappa * self._mu
-
-    def energy(self, owned_values) -> float:
-        return self.barrier.energy(self.displacement(owned_values))
-
     def objective(self, owned_values) -> float:
         """The term's energy, inf where the surface passes through itself."""
         return self.energy(owned_values)
 
     def terms(self, owned_values) -> ContactTerms:
-        energy, grad, _ = self.barrier.derivatives(self.displacement(owned_values), hessian=False)
+        energy, grad, _ = self.term.derivatives(self.displacement(owned_values), hessian=False)
         return ContactTerms(energy, self.global_entries, grad.reshape(-1))
 
     def entry_blocks(self, owned_values) -> list:
         """The exact Hessian's blocks (the stability criteria read its inertia)."""
-        return self.barrier.derivatives(self.displacement(owned_values))[2]
+        return self.term.derivatives(self.displacement(owned_values))[2]
 
     def newton_blocks(self, owned_values) -> list:
         """The blocks Newton's matrix takes: each pair's Hessian projected to positive semi-definite (incremental
@@ -251,7 +244,7 @@ class BarrierContact(GatheredSurface):
         edge pair or a point and a triangle) is no instability of the body, yet with it the minimizer shifted K
         at every iteration of a fold closing in 3D and did not converge (the creasing plate one element wide:
         2808 shifted factorizations and a failed step exact, 122 and the whole run projected, measured)."""
-        return self.barrier.derivatives(self.displacement(owned_values), project=True)[2]
+        return self.term.derivatives(self.displacement(owned_values), project=True)[2]
 
     def step_fraction(self, owned_start, owned_step) -> float:
         """The fraction of the step ``owned_step`` (owned part of a mixed-space array, the iterate moving to
@@ -259,7 +252,7 @@ class BarrierContact(GatheredSurface):
         STEP_SAFETY, capped at 1."""
         u0 = self.displacement(owned_start)
         du = self.displacement(owned_step)
-        free = self.barrier.step_fraction(u0, u0 - du)
+        free = self.term.step_fraction(u0, u0 - du)
         return 1.0 if free >= 1.0 else STEP_SAFETY * free
 
     def crossing(self, owned_values) -> tuple | None:
@@ -272,17 +265,17 @@ class BarrierContact(GatheredSurface):
     def traction(self, owned_values) -> np.ndarray:
         """The contact traction (n, dim) [MPa] on each surface node: the barrier's force on it over the
         reference area (2D: length) it stands for."""
-        _, grad, _ = self.barrier.derivatives(self.displacement(owned_values), hessian=False)
-        return -grad / self.barrier.area[:, None]
+        _, grad, _ = self.term.derivatives(self.displacement(owned_values), hessian=False)
+        return -grad / self.term.area[:, None]
 
     def observables(self, owned_values) -> dict:
         """history.csv's contact columns: the reference surface within the barrier's reach of another part
         (its nodes' areas), the zones (connected groups of such nodes along the surface), the place of the
         closest approach and, as "penetration", 0 (the barrier admits none)."""
-        nodes, dist = self.barrier.pairs(self.displacement(owned_values))
+        nodes, dist = self.term.pairs(self.displacement(owned_values))
         zones = self._zones(nodes)
         k = int(nodes[np.lexsort((*self.X[nodes].T[::-1], dist))[0]]) if len(nodes) else None
-        return {"contact_length_mm": float(self.barrier.area[nodes].sum()), "creases": len(zones),
+        return {"contact_length_mm": float(self.term.area[nodes].sum()), "creases": len(zones),
                 "contact_x_mm": float(self.X[k, 0]) if k is not None else float("nan"),
                 "contact_y_mm": float(self.X[k, 1]) if k is not None else float("nan"),
                 "penetration_mm": 0.0}
@@ -292,11 +285,11 @@ class BarrierContact(GatheredSurface):
 
     def zone_summary(self, owned_values) -> list[dict]:
         """The contact zones of a state: each one's nodes' reference ranges (x, y[, z]) and area (2D: length)."""
-        nodes, _ = self.barrier.pairs(self.displacement(owned_values))
+        nodes, _ = self.term.pairs(self.displacement(owned_values))
         out = []
         for zone in self._zones(nodes):
             X = self.X[zone]
             z = {f"{a}_mm": [float(X[:, i].min()), float(X[:, i].max())] for i, a in enumerate("xyz"[:self.dim])}
-            z["length_mm" if self.dim == 2 else "area_mm2"] = float(self.barrier.area[zone].sum())
+            z["length_mm" if self.dim == 2 else "area_mm2"] = float(self.term.area[zone].sum())
             out.append(z)
         return out

@@ -81,6 +81,10 @@ class GatheredSurface:
     displacement dofs in the problem's mixed space, ``facets`` the node indices of each facet in the order of
     :meth:`order`. Entry dim i + c of every array of surface entries is node i's displacement component c."""
 
+    #: the subclass's energy of the gathered nodes' displacement (its ``stiffness``, ``energy(u)``, derivatives):
+    #: the penalty's :class:`~app.model.polyline_penalty.PolylinePenalty` or the barrier's ``Barrier``
+    term = None
+
     def __init__(self, problem, kappa: float):
         p = self.p = problem
         self.kappa = float(kappa)
@@ -179,6 +183,12 @@ class GatheredSurface:
 
     def set_kappa(self, kappa: float) -> None:
         self.kappa = float(kappa)
+        if self.term is not None:
+            self.term.stiffness = self.kappa * self._mu
+
+    def energy(self, owned_values) -> float:
+        """The contact energy at the state ``owned_values`` (owned part of a mixed-space array)."""
+        return self.term.energy(self.displacement(owned_values))
 
     def traction_into(self, f, owned_values) -> None:
         """Write the subclass's ``traction`` (n, dim) into a Function ``f`` of the problem's displacement

@@ -26,36 +26,29 @@ class PenaltyContact(GatheredSurface):
 
     def __init__(self, problem, kappa: float):
         super().__init__(problem, kappa)
-        self.penalty = PolylinePenalty(self.X, np.asarray(self.facets, np.int64).reshape(-1, 2), self.kappa * self._mu)
+        self.term = PolylinePenalty(self.X, np.asarray(self.facets, np.int64).reshape(-1, 2), self.kappa * self._mu)
 
     def order(self, facets: list[Facet]) -> list[Facet]:
         """Each segment's midpoint, then its first end (a slit's two coincident faces run opposite ways)."""
         return sorted(facets, key=lambda f: ((f.points[0][0] + f.points[1][0]) / 2,
                                              (f.points[0][1] + f.points[1][1]) / 2, *f.points[0]))
 
-    def set_kappa(self, kappa: float) -> None:
-        self.kappa = float(kappa)
-        self.penalty.stiffness = self.kappa * self._mu
-
     def state(self, owned_values) -> ContactState:
-        return self.penalty.pairs(self.displacement(owned_values))
-
-    def energy(self, owned_values) -> float:
-        return self.penalty.energy(self.displacement(owned_values))
+        return self.term.pairs(self.displacement(owned_values))
 
     def objective(self, owned_values) -> float:
         """The term's energy, or inf outside its domain: where a node has tunnelled through the surface
         beyond the pairing's reach (:meth:`~app.model.polyline_penalty.PolylinePenalty.tunnelled_crossings`). The minimizer's line search
         then shortens the step; the penalty alone, which falls to zero beyond the reach, would let a step
         tunnel a node through the surface and call it a decrease of the energy."""
-        return self.penalty.objective(self.displacement(owned_values))
+        return self.term.objective(self.displacement(owned_values))
 
     def tunnelled_crossing(self, owned_values) -> tuple[float, float] | None:
         """The reference midpoint of the first segment of a crossing with a tunnelled node, or None."""
-        found = self.penalty.tunnelled_crossings(self.displacement(owned_values))
+        found = self.term.tunnelled_crossings(self.displacement(owned_values))
         if not len(found):
             return None
-        pen = self.penalty
+        pen = self.term
         mid = 0.5 * (pen.X[pen.segments[found[0, 0], 0]] + pen.X[pen.segments[found[0, 0], 1]])
         return float(mid[0]), float(mid[1])
 
@@ -63,24 +56,24 @@ class PenaltyContact(GatheredSurface):
         """The contact traction (n, 2) [MPa] on each surface node: the penalty's force on the node (minus its
         gradient, from the pairs the node is in, on either side) over the node's tributary length (0 off
         contact)."""
-        _, grad, _ = self.penalty.derivatives(self.displacement(owned_values), hessian=False)
-        return -grad / self.penalty.tributary[:, None]
+        _, grad, _ = self.term.derivatives(self.displacement(owned_values), hessian=False)
+        return -grad / self.term.tributary[:, None]
 
     def entry_blocks(self, owned_values) -> list:
         """The Hessian's blocks at the state ``owned_values`` (owned part of a mixed-space array), as
         (surface entries, H): entry 2 i + c is node i's displacement component c."""
-        return self.penalty.derivatives(self.displacement(owned_values))[2]
+        return self.term.derivatives(self.displacement(owned_values))[2]
 
     def terms(self, owned_values) -> ContactTerms:
         """The energy and gradient at the state ``owned_values``, in the mixed space's global dofs."""
-        energy, grad, _ = self.penalty.derivatives(self.displacement(owned_values), hessian=False)
+        energy, grad, _ = self.term.derivatives(self.displacement(owned_values), hessian=False)
         return ContactTerms(energy, self.global_entries, grad.reshape(-1))
 
     def observables(self, owned_values) -> dict:
         """history.csv's contact columns (app.model.history's "contact" group) at a state: the surface length in
         contact, the zones, the deepest contact's reference place and its penetration (the penalty's gap)."""
         state = self.state(owned_values)
-        pen = self.penalty
+        pen = self.term
         at = deepest(state.points, state.gaps, pen.Xp) if len(state.points) else None
         return {"contact_length_mm": pen.contact_length(state), "creases": len(pen.zones(state)),
                 "contact_x_mm": float(pen.Xp[at, 0]) if at is not None else float("nan"),
@@ -90,7 +83,7 @@ class PenaltyContact(GatheredSurface):
     def zone_summary(self, owned_values) -> list[dict]:
         """The contact zones of a state: each one's contact points' reference x and y range and its length."""
         state = self.state(owned_values)
-        pen = self.penalty
+        pen = self.term
         zones = []
         for points in pen.zones(state):
             X = pen.Xp[points]

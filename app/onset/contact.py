@@ -146,7 +146,7 @@ def penalty_overrun(problem, array: np.ndarray) -> Limit | None:
         return Limit("contact", where[:2], "the surface passes through itself (a step the barrier's collision "
                      "filter did not stop: a shorter step)", OVERRUN, overshoot=True)
     state = c.state(array)
-    pen = c.penalty
+    pen = c.term
     if len(state.points):
         depth = -state.gaps / pen.element[state.points]
         k = int(np.argmax(depth))
