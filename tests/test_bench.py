@@ -48,6 +48,42 @@ def test_bench_rejects_bad_sizes(capsys):
         assert err == ""
 
 
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="bench --factor launches one serial process per size itself")
+def test_bench_factor_factors_each_size_once_in_its_own_process(shared_tmp, capsys):
+    """``bench --factor``: a named size and one given as an element size in mm, each in a process of its own.
+    Each row has the problem's dofs (as the factory builds that size's config here), the film layers scaled
+    with the element (the elements keep their shape), and the inertia of K at the unloaded preswollen state,
+    which is stable: no negative or zero eigenvalue, one positive one per free dof."""
+    from app import factory
+    from app.workflows.bench import size_config
+
+    out = shared_tmp / "factor"
+    capsys.readouterr()
+    assert cli.main(["bench", "--factor", "--sizes", "coarse,0.02", "-o", str(out), "-q",
+                     "--set", "geometry.length=0.2"]) == 0
+    table = capsys.readouterr().out
+    rows = json.loads((out / "factor.json").read_text())["sizes"]
+    assert [r["size"] for r in rows] == ["coarse", "0.02"]
+    default = size_config("default", ["geometry.length=0.2"])["mesh"]
+    assert rows[1]["element_size_mm"] == 0.02
+    assert rows[1]["film_layers"] == max(1, round(default["film_layers"] * default["element_size"] / 0.02))
+    for r in rows:
+        cfg = size_config(r["size"], ["geometry.length=0.2"])
+        assert r["dofs"] == factory.problem(cfg, MPI.COMM_SELF).dofs()
+        assert r["inertia"] == [0, 0, r["free_dofs"]] and 0 < r["free_dofs"] < r["dofs"]
+        assert r["peak_rss_mb"] > 0 and r["assemble_and_factor_s"] > 0
+        assert f"| {r['size']} |" in table
+    assert (out / "factor.md").read_text().strip() == table.strip()
+
+
+def test_bench_factor_is_alone(capsys):
+    assert cli.main(["bench", "--factor", "--baseline"]) == 2
+    assert cli.main(["bench", "--sizes", "-0.01"]) == 2
+    err = capsys.readouterr().err
+    if MPI.COMM_WORLD.rank == 0:
+        assert "--factor" in err and "element size in mm" in err
+
+
 def test_bench_counts_each_size_separately(shared_tmp):
     """PETSc's event log is cumulative per process: the same deterministic run measured twice in one
     process must report the same counts, not the sum of both."""

@@ -147,6 +147,28 @@ def test_either_imperfection_sign_gives_the_same_amplitude(branch_runs):
     assert compared >= 5
 
 
+def test_step_cost_splits_the_steps_at_the_first_switch(branch_runs):
+    """summary.json's step_cost against history.csv: the steps after the first switch's time are the branch's,
+    the others the steps before it, with their Newton iterations; the fundamental run has no branch part."""
+    for name in ("plus", "fundamental"):
+        s, rows = branch_runs[name]
+        cost = s["step_cost"]
+        steps = [r for r in rows if int(r["step"]) > 0]
+        switches = (s.get("postbuckling") or {}).get("switches") or []
+        t_switch = switches[0]["time"] if switches else float("inf")
+        before = [int(r["newton_its"]) for r in steps if float(r["time"]) <= t_switch * (1 + 1e-12)]
+        after = [int(r["newton_its"]) for r in steps if float(r["time"]) > t_switch * (1 + 1e-12)]
+        assert cost["before_branch"]["steps"] == len(before) and sum(before) > 0
+        assert cost["before_branch"]["newton_its_mean"] == pytest.approx(sum(before) / len(before), rel=1e-12)
+        if name == "fundamental":
+            assert "branch" not in cost and not after
+            continue
+        assert cost["branch"]["steps"] == len(after) > 0
+        assert cost["branch"]["newton_its_mean"] == pytest.approx(sum(after) / len(after), rel=1e-12)
+        assert cost["branch_over_before"] == pytest.approx(cost["branch"]["mean_s"] / cost["before_branch"]["mean_s"])
+        assert 0 < cost["before_branch"]["mean_s"] <= cost["before_branch"]["mean_with_test_s"]
+
+
 def test_branch_steps_end_at_the_newton_tolerance(monkeypatch, tmp_path):
     """Near the minimizer the energy's roundoff hides the decrease and the line search shrinks the step
     to nothing; such a step must not count as converged short of the tolerance: every accepted solve

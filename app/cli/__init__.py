@@ -10,6 +10,7 @@ be written (one line naming it; what was written, and the last checkpoint, are k
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -163,9 +164,22 @@ def cmd_bench(args) -> int:
     from app.workflows import bench
 
     comm = _comm()
+    if args.factor_one:  # a process of bench --factor: its row as JSON
+        from app.workflows.bench_factor import factor_one
+
+        print(json.dumps(factor_one(args.factor_one, args.set, comm)))
+        return EXIT_OK
+    if args.factor and (args.ranks or args.baseline or args.error_estimate):
+        raise config.ConfigError("", "bench --factor times one factorization per size; allowed with it: --sizes, "
+                                 "--set, -o (not --ranks, --baseline, --error-estimate)")
     sizes, ranks = bench.parse_sizes(args.sizes), bench.parse_ranks(args.ranks, comm)
     bench.check(sizes, args.set, args.output, comm)  # the directory named as the user wrote it
     _start(comm, args)
+    if args.factor:
+        from app.workflows import bench_factor
+
+        _say(comm, bench_factor.command(sizes, args.set, Path(args.output), comm))
+        return EXIT_OK
     text = bench.command(sizes, ranks, args.set, Path(args.output), comm, args.json_only, args.baseline, args.only,
                          args.error_estimate)
     if text:

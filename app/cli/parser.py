@@ -70,7 +70,12 @@ def parser() -> argparse.ArgumentParser:
     be = _add(sub, "bench", "time the default bilayer (or, with --set geometry.kind=plate, the 3D plate) to onset "
               "at three mesh sizes", config_arg=False,
               output="directory for bench.json and the runs", default="results/bench")
-    be.add_argument("--sizes", default="coarse,default,fine", help="comma-separated: coarse, default, fine, finer")
+    be.add_argument("--sizes", default="coarse,default,fine",
+                    help="comma-separated: coarse, default, fine, finer, or element sizes in mm (film layers scaled)")
+    be.add_argument("--factor", action="store_true",
+                    help="instead of timing runs: build each size's problem, factor K once in a process of its own "
+                         "and print its dofs, times and peak memory (how large a case the direct solver holds)")
+    be.add_argument("--factor-one", help=argparse.SUPPRESS)  # one size of --factor, in its own process
     be.add_argument("--ranks", help="comma-separated rank counts to launch under mpirun, e.g. 1,2")
     be.add_argument("--baseline", action="store_true",
                     help="also run each size with the settings before factor reuse (solver.reuse=false), just "

@@ -224,6 +224,11 @@ class OnsetTracker:
                                     "before_critical": not c or self.surface_onset["time"] < c[0].time}
         return out
 
+    @property
+    def switches(self) -> int:
+        """The branch switches made so far (0 without a followed branch)."""
+        return len(self.branch.switches) if self.branch is not None else 0
+
     def branch_summary(self) -> dict:
         """The summary's ``postbuckling`` block (after_onset = "branch"; empty otherwise)."""
         if self.branch is None:
@@ -299,6 +304,7 @@ class NoStabilityTest:
 
     COLUMNS = ()
     crossings = ()
+    switches = 0
 
     def start(self, rec) -> None:
         pass

@@ -54,10 +54,22 @@ from app.workflows.variants import variant
 SIZES = {"coarse": 2.0, "default": 1.0, "fine": 0.7, "finer": 0.5}  # element size x s, film layers / s
 
 
+def _element_size(name: str) -> float | None:
+    """A size given as an element size in mm (a positive number), else None."""
+    try:
+        value = float(name)
+    except ValueError:
+        return None
+    return value if value > 0 else None
+
+
 def size_config(name: str, overrides: list[str]) -> dict:
-    scale = SIZES[name]
+    """The config of a bench size: the default config (with ``overrides``) at a named size's scale of its element
+    size, or at an element size in mm; its film layers scaled inversely, so the elements keep their shape."""
     cfg = config.resolve({}, list(overrides))
-    return variant(cfg, {"mesh.element_size": cfg["mesh"]["element_size"] * scale,
+    given = _element_size(name)
+    scale = SIZES[name] if given is None else given / cfg["mesh"]["element_size"]
+    return variant(cfg, {"mesh.element_size": given if given is not None else cfg["mesh"]["element_size"] * scale,
                          "mesh.film_layers": max(1, round(cfg["mesh"]["film_layers"] / scale)),
                          "output.plot": False, "stability.error_estimate": False,
                          "output.checkpoint_every": 0})  # timings of the solver, not of checkpoints
@@ -262,11 +274,13 @@ def _launch(k: int, sizes: list[str], overrides: list[str], outdir: Path, extra:
 
 
 def parse_sizes(text: str) -> list[str]:
-    """``--sizes``: known names, each at most once (one result per size); else a ConfigError."""
+    """``--sizes``: known names or element sizes in mm, each at most once (one result per size); else a
+    ConfigError."""
     sizes = [x.strip() for x in text.split(",") if x.strip()]
-    bad = [x for x in sizes if x not in SIZES]
+    bad = [x for x in sizes if x not in SIZES and _element_size(x) is None]
     if bad or not sizes:
-        raise config.ConfigError("--sizes", f"{','.join(bad) or '(none)'}; allowed: " + ", ".join(SIZES))
+        raise config.ConfigError("--sizes", f"{','.join(bad) or '(none)'}; allowed: " + ", ".join(SIZES)
+                                 + " or an element size in mm (> 0)")
     twice = sorted({x for x in sizes if sizes.count(x) > 1})
     if twice:
         raise config.ConfigError("--sizes", f"{','.join(twice)} given more than once; allowed: each of "

@@ -23,6 +23,7 @@ from app.onset.tracker import StabilitySettings, onset_tracker
 from app.solvers.newton import SolverSettings
 from app.solvers.step_control import TimeSettings
 from app.solvers.stepped_problem import ModelLimit, StepFailure, StepRecord
+from app.workflows.step_costs import StepCosts
 
 ASSUMPTIONS = (
     "material.shear_modulus (gamma_s) defaults to 0.1 MPa: the paper gives only ratios gamma_f/gamma_s",
@@ -81,6 +82,7 @@ def simulate(cfg: dict, outdir, comm, problem: Problem | None = None, progress: 
         writer.write_fields(stepper.t, stepper.step, last=True)
     summary = summarize(status if status == "interrupted" else tracker.status(status), message, writer.rows[-1],
                         problem, stepper, tracker, settings, cfg, time.perf_counter() - wall0)
+    summary["step_cost"] = loop.costs.summary()  # this part of the run's steps (a resumed run: since the resume)
     if problem.contact is not None:
         summary["creases"] = contact_summary(problem, writer.rows)
     shape = shape_of(problem)
@@ -141,6 +143,7 @@ class RunLoop:
         self.checkpoints, self.watch, self.settings, self.profiles = checkpoints, watch, settings, profiles
         self.log, self.detail = logging_setup.get(), detail
         self.monitor = None  # told every accepted step after the progress line (a study's progress)
+        self.costs = StepCosts()  # each accepted step's wall time, by part of the run (summary.json step_cost)
 
     @classmethod
     def build(cls, cfg: dict, outdir, comm, settings: RunSettings, problem, resume, progress: bool, watch) -> RunLoop:
@@ -199,8 +202,12 @@ class RunLoop:
                 if stop is not None:
                     self._checkpoint()
                     return stop
+                t0 = time.perf_counter()
                 rec = stepper.advance()
-                self._observe(rec)
+                solve = time.perf_counter() - t0
+                test = self._observe(rec)
+                self.costs.add(solve, test, rec.newton_its, stepper.minimizing,
+                               rec.values.get("contact_length_mm", 0.0) > 0, self.tracker.switches)
                 end = self._end_after(rec)
                 if end is not None:
                     return end
@@ -228,14 +235,18 @@ class RunLoop:
             return "interrupted", message
         return None
 
-    def _observe(self, rec) -> None:
-        """Everything told of an accepted step, in order (the tracker's columns go into the history row)."""
+    def _observe(self, rec) -> float:
+        """Everything told of an accepted step, in order (the tracker's columns go into the history row);
+        the wall time of its stability test."""
         self.writer.write_fields(rec.time, rec.step)
+        t0 = time.perf_counter()
         self.tracker.test(rec)
+        test = time.perf_counter() - t0
         self.writer.history_row(rec.row())
         self.detail(progress_line(rec))
         if self.monitor is not None:
             self.monitor(rec)
+        return test
 
     def _end_after(self, rec) -> tuple[str, str] | None:
         """The crossings located and the policy asked; on a branch the surface profile kept; equilibrium."""
