@@ -186,7 +186,7 @@ def run_reduced(cfg: dict, outdir: str | Path, comm=None, verbose: bool = False)
     """
     from app import interrupt
     from app.workflows import preflight
-    from app.workflows import reduced as reduced_workflow
+    from app.workflows import reduction as reduced_workflow
 
     comm = _comm(comm)
     cfg = config.resolve(cfg)

@@ -26,11 +26,11 @@ def wrinkling_strain(sets: list[str], ratio: float) -> tuple[float, str]:
     """The exact wrinkling onset's applied strain and the wrinkle count at ``ratio`` (``surface``: the
     short-wave limit, Biot's surface instability, comes first)."""
     from app import config, factory
-    from app.workflows import reduced
+    from app.workflows import reduction
 
     cfg = config.load(str(CONFIG), [*sets, f"material.film.modulus_ratio={ratio!r}",
                                     "reduced.horizon=0"])
-    block = reduced.compute(cfg)
+    block = reduction.compute(cfg)
     if block["time"] is None:
         raise NoOnset(f"ratio {ratio}: no wrinkling onset up to time.end ({cfg['time']['end']} s)")
     n = block["wrinkle_count"]

@@ -176,7 +176,7 @@ MUTATIONS = [
     ("1D reduction: the sin part of the mode's gradient with the wrong sign", "app/reduced/modes.py",
      r"\[-k \* V, V\.dx\(0\)\]", "[k * V, V.dx(0)]",
      ["tests/test_reduction.py::test_stiff_film_in_compression_wrinkles_at_the_film_on_substrate_strain"]),
-    ("2D surface check: the surface state not in equilibrium with the bath", "app/onset/surface.py",
+    ("2D surface check: the surface state not in equilibrium with the bath", "app/onset/surface_check.py",
      r"\(mu - self\.mu_bar\) \* v\[dim\]", "(mu - 0.0) * v[dim]",
      ["tests/test_surface_check.py"]),
     ("a solve failed with a kept factor is not repeated with plain Newton", "app/solvers/newton.py",

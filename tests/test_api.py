@@ -199,13 +199,13 @@ def test_an_interrupted_reduction_leaves_no_earlier_answer_behind(tmp_path):
     are gone (a stale summary.json would pass for the new config's), so ``load_result`` refuses the
     directory."""
     from app.reduced.solve import Interrupted
-    from app.workflows import reduced
+    from app.workflows import reduction
 
     cfg = hb.load_config(_small(tmp_path))
     hb.run_reduced(cfg, tmp_path / "r")
     assert (tmp_path / "r" / "summary.json").is_file()
     with pytest.raises(Interrupted):
-        reduced.run(hb.load_config(_small(tmp_path), {"material.film.modulus_ratio": 20}), tmp_path / "r",
+        reduction.run(hb.load_config(_small(tmp_path), {"material.film.modulus_ratio": 20}), tmp_path / "r",
                     stop=lambda: True)
     assert not any((tmp_path / "r" / name).exists() for name in ("summary.json", "margin.csv", "history.csv"))
     with pytest.raises(FileNotFoundError, match="no summary.json"):

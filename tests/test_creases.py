@@ -1,4 +1,4 @@
-"""The energetic crease onset (stability.creases; app/onset/creases.py, app/onset/maxwell.py, app/workflows/creases.py,
+"""The energetic crease onset (stability.creases; app/onset/creases.py, app/onset/maxwell.py, app/workflows/crease_onset.py,
 docs/creases.md).
 
 - A homogeneous layer in plane-strain compression with the fluid frozen: the crease onset at the nominal
@@ -22,7 +22,7 @@ from conftest import long_physics
 from app import config, factory, geometry
 from app.onset.creases import CreaseFailed, CreaseTrial, FlatFailed
 from app.onset import maxwell
-from app.workflows import creases as workflow
+from app.workflows import crease_onset as workflow
 from app.workflows.pipeline import run_case
 
 HZS_STRAIN = 0.354  # Hong, Zhao & Suo 2009: incompressible neo-Hookean half-space, plane-strain compression
@@ -117,7 +117,7 @@ def test_a_growing_crease_in_a_bilayer_takes_a_size_of_its_own(comm):
     about twice the film; the onset lies
     below the exact wrinkling onset of the same strip (the 1D reduction: measured 0.3623): the crease comes
     first."""
-    from app.workflows import reduced
+    from app.workflows import reduction
 
     cfg = block("material.film.modulus_ratio=1.5", "mesh.element_size=0.025", "mesh.film_layers=4")
     levels = {size: _coarsest_level(cfg, comm, size, True) for size in (0.0125, 0.00625)}
@@ -125,7 +125,7 @@ def test_a_growing_crease_in_a_bilayer_takes_a_size_of_its_own(comm):
     assert b["applied_strain"] == pytest.approx(a["applied_strain"], rel=0.005)
     assert b["depth_mm"] == pytest.approx(a["depth_mm"], rel=0.05)
     assert 1.5 * 0.05 < a["depth_mm"] < 3 * 0.05
-    wrinkling = reduced.compute(cfg)["time"] * cfg["loading"]["compression_strain"]  # strain linear in t to t = 1
+    wrinkling = reduction.compute(cfg)["time"] * cfg["loading"]["compression_strain"]  # strain linear in t to t = 1
     assert a["applied_strain"] < wrinkling - 0.03
 
 

@@ -29,7 +29,7 @@ from test_creases import same_on_one_and_all_ranks
 from app import config, factory, geometry
 from app.model import theory
 from app.onset.creases import CreaseTrial
-from app.workflows import creases as workflow
+from app.workflows import crease_onset as workflow
 from app.workflows.pipeline import run_case
 
 HZS_STRAIN = 0.354  # Hong, Zhao & Suo 2009: incompressible neo-Hookean half-space, plane-strain compression

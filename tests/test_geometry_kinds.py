@@ -166,10 +166,10 @@ def test_a_registered_kinds_cross_section_gives_its_1d_reduction(toy_strip, toy)
     a loading outside its reduced_loadings and a kind without any are reported as not reducible, naming the key."""
     from cases import swelling_case
 
-    from app.workflows import reduced
+    from app.workflows import reduction
 
-    ref = reduced.compute(swelling_case())
-    got = reduced.compute(swelling_case("geometry.kind=toy-strip"))
+    ref = reduction.compute(swelling_case())
+    got = reduction.compute(swelling_case("geometry.kind=toy-strip"))
     assert got["kind"] == ref["kind"] == "wrinkles"
     for name in ("time", "growth_um", "wrinkle_count", "mu_bar"):
         assert got[name] == ref[name], name

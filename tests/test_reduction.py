@@ -32,7 +32,7 @@ from app.reduced.halfspace import HalfSpace
 from app.reduced.onset import Screen, Stability, margin_curve, mode_grid
 from app.reduced.solve import n_max
 from app.reduced.transient import LayeredModel, Resolution, Transient
-from app.workflows import reduced
+from app.workflows import reduction
 
 
 def _gel(gamma):
@@ -92,7 +92,7 @@ def test_surface_crossing_comes_at_the_homogeneous_critical_stretch(criterion, r
     cfg = config.load("configs/bilayer.toml", [f"stability.criterion={criterion}",
                                                f"material.film.modulus_ratio={ratio}"])
     sec = factory.section(cfg)
-    st = reduced.settings(cfg)
+    st = reduction.settings(cfg)
     m = LayeredModel(sec, st.resolution)
     stab = Stability(m, criterion)
     screen = Screen(stab, mode_grid(8, 8), 20.0)  # a few modes: the surface limit is what is tested
@@ -126,7 +126,7 @@ def test_stiff_film_in_compression_wrinkles_at_the_film_on_substrate_strain():
         "loading": {"kind": "compression", "compression_strain": 0.07},
         "stability": {"criterion": "undrained"},
         "time": {"end": 1.0, "dt_initial": 0.05, "dt_max": 0.05}})
-    block = reduced.compute(cfg)
+    block = reduction.compute(cfg)
     mats = layer_materials(cfg)
     eps_c = theory.film_wrinkling_strain(mats["film"], mats["substrate"])
     l_c = theory.film_wrinkling_wavelength(mats["film"], mats["substrate"], 0.01)
@@ -147,8 +147,8 @@ def test_error_bar_covers_a_finer_computation():
     """The reduced answer of the default bilayer with its steps halved again (step_change / 2) and its mesh
     refined (film cells x 2): within the default answer's error bar, which is under 0.1% of g_c."""
     cfg = config.load("configs/bilayer.toml")
-    a = reduced.compute(cfg)
-    b = reduced.compute(config.load("configs/bilayer.toml", ["reduced.step_change=0.005", "reduced.film_cells=24"]))
+    a = reduction.compute(cfg)
+    b = reduction.compute(config.load("configs/bilayer.toml", ["reduced.step_change=0.005", "reduced.film_cells=24"]))
     assert a["kind"] == b["kind"] == "wrinkles"
     assert a["wrinkle_count"] == b["wrinkle_count"] == 19
     assert a["growth_error_um"] < 1e-3 * a["growth_um"]
@@ -216,8 +216,8 @@ def test_answer_does_not_depend_on_the_largest_wavenumber_screened(sets):
     """Screening modes up to k w = 80 instead of 20: the same answer (a finite mode, or the surface's
     short-wave limit, which covers every wave beyond the screened ones), and the same first finite
     wavelength: convergence in the largest n tested."""
-    a = reduced.compute(config.load("configs/bilayer.toml", sets))
-    b = reduced.compute(config.load("configs/bilayer.toml", [*sets, "reduced.max_wavenumber=80"]))
+    a = reduction.compute(config.load("configs/bilayer.toml", sets))
+    b = reduction.compute(config.load("configs/bilayer.toml", [*sets, "reduced.max_wavenumber=80"]))
     assert b["tested_mode_numbers"][1] >= 4 * a["tested_mode_numbers"][1] - 4
     assert (a["kind"], a["mode_number"]) == (b["kind"], b["mode_number"])
     assert b["growth_um"] == pytest.approx(a["growth_um"], rel=1e-9)
@@ -245,7 +245,7 @@ def test_the_reduction_beside_a_run_is_computed_once_and_reaches_every_rank(shar
 
     block = timeless(s["reduced"])
     assert len({json.dumps(b, sort_keys=True) for b in comm.allgather(block)}) == 1
-    assert block == on_rank0(lambda: timeless(reduced.compute(cfg)))
+    assert block == on_rank0(lambda: timeless(reduction.compute(cfg)))
     assert block["solver"] == "reduced-1d" and block["kind"] not in ("failed", "interrupted"), block
 
 
@@ -261,7 +261,7 @@ def test_study_by_the_reduction_matches_single_computations_and_reruns_nothing(s
     rows = on_rank0(lambda: list(csv.DictReader(open(out / "study.csv"))))
     assert [r["solver"] for r in rows] == ["reduced-1d"] * 2 and [r["onset"] for r in rows] == ["wrinkles"] * 2
     _, cases = studies.study_cases("bilayer-modulus-ratio", out, "8", [])
-    single = reduced.compute(cases[0].cfg) if comm.rank == 0 else None
+    single = reduction.compute(cases[0].cfg) if comm.rank == 0 else None
     single = comm.bcast(None if single is None else {k: v for k, v in single.items() if k != "_estimate"}, root=0)
     assert float(rows[1]["g_c_um"]) == pytest.approx(single["growth_um"], rel=1e-12)
     assert float(rows[1]["N_c"]) == single["wrinkle_count"] == 19
@@ -286,7 +286,7 @@ def test_mode_operator_of_a_homogeneous_layer_at_short_waves_is_the_surface_cond
     undrained). Measured 1e-6 / 8e-6."""
     cfg = config.load("configs/bilayer.toml", ["material.film.modulus_ratio=1"])
     sec = factory.section(cfg)
-    m = LayeredModel(sec, reduced.settings(cfg).resolution)
+    m = LayeredModel(sec, reduction.settings(cfg).resolution)
     stab = Stability(m, criterion)
     gel = sec.materials["film"]
     k = 500.0

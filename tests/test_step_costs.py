@@ -3,7 +3,6 @@ run's parts, against hand sums of a made-up run, and in a real branch run agains
 
 from __future__ import annotations
 
-import csv
 import statistics
 
 import pytest

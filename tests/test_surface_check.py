@@ -1,4 +1,4 @@
-"""The 2D run's check of the permeable surface's short-wave limit (app/onset/surface.py).
+"""The 2D run's check of the permeable surface's short-wave limit (app/onset/surface_check.py).
 
 - the surface state in equilibrium with the bath against the closed-form laterally constrained layer;
 - a 2D bilayer whose surface becomes unstable at short waves before it wrinkles (the paper's w = 0.05 mm
@@ -21,8 +21,8 @@ from app import config
 from app.model import theory
 from app.model.material import chemical_potential, first_piola
 from app.factory import layer_materials
-from app.onset.surface import SurfaceState
-from app.workflows import reduced
+from app.onset.surface_check import SurfaceState
+from app.workflows import reduction
 from app.workflows.run import simulate
 
 
@@ -71,7 +71,7 @@ def test_2d_bilayer_reports_the_surface_onset_at_the_bath_potential_of_the_criti
     assert so["bracket"][0] <= so["time"] <= so["bracket"][1]
     assert so["before_critical"] and s["critical"]["time"] > so["time"]
     assert so["where"][1] == pytest.approx(0.55)  # on the film's surface
-    red = reduced.compute(cfg) if comm.rank == 0 else None
+    red = reduction.compute(cfg) if comm.rank == 0 else None
     red = comm.bcast({k: v for k, v in red.items() if k != "_estimate"} if red else None, root=0)
     assert red["kind"] == "surface"
     assert red["time"] == pytest.approx(so["time"], abs=2e-4)
@@ -87,7 +87,7 @@ def test_2d_homogeneous_tube_surface_onset_equals_the_reduction(shared_tmp, comm
         "time.end=1.0"])
     s = simulate(cfg, shared_tmp / "tube1", comm, progress=False)
     so = s["surface_onset"]
-    red = reduced.compute(cfg) if comm.rank == 0 else None
+    red = reduction.compute(cfg) if comm.rank == 0 else None
     red = comm.bcast({k: v for k, v in red.items() if k != "_estimate"} if red else None, root=0)
     assert red["kind"] == "surface"
     assert so["time"] == pytest.approx(red["time"], abs=1e-3)

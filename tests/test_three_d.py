@@ -432,9 +432,9 @@ def test_a_3d_first_mode_that_is_not_the_1d_first_is_placed_in_the_1d_order():
     A 3D run whose first mode is (3, 3) is told where that mode crosses in 1D and whether the gap lies within its
     error bar (the measured default plate: bar 0.4996 um, gap 0.0433 um, so not resolved); a 3D tube whose
     first mode has an axial wave is told that the 1D reduction does not cover it; agreeing modes say nothing."""
-    from app.workflows import reduced
+    from app.workflows import reduction
 
-    red = reduced.compute(config.load(REPO / "configs" / "plate.toml"))
+    red = reduction.compute(config.load(REPO / "configs" / "plate.toml"))
     red.pop("_estimate")
     assert sorted(map(tuple, red["wave_vectors"])) == [(0, 5), (3, 4), (4, 3), (5, 0)]
     later = next(m for m in red["mode_crossings"] if [3, 3] in m["wave_vectors"])
@@ -447,15 +447,15 @@ def test_a_3d_first_mode_that_is_not_the_1d_first_is_placed_in_the_1d_order():
         return {"critical": {"growth_um": red["growth_um"] + 0.2, "modes": [{"wave_vector": wave}],
                              "discretization_error": {"total_um": bar} if bar else None}, "reduced": red}
 
-    wide, narrow = reduced.mode_order(run([3, 3], 0.4996)), reduced.mode_order(run([3, 3], gap / 2))
+    wide, narrow = reduction.mode_order(run([3, 3], 0.4996)), reduction.mode_order(run([3, 3], gap / 2))
     assert wide == {"wave_vector": [3, 3], "in_1d": True, "growth_um": later["growth_um"], "gap_um": gap,
                     "within_error_bar": True}
-    assert narrow["within_error_bar"] is False and reduced.mode_order(run([3, 3], None))["within_error_bar"] is None
-    assert "not resolved at this mesh" in reduced.compare(run([3, 3], 0.4996))
-    assert "puts the wrong mode first" in reduced.compare(run([3, 3], gap / 2))
-    assert reduced.mode_order(run([4, 3], 0.4996)) is None
+    assert narrow["within_error_bar"] is False and reduction.mode_order(run([3, 3], None))["within_error_bar"] is None
+    assert "not resolved at this mesh" in reduction.compare(run([3, 3], 0.4996))
+    assert "puts the wrong mode first" in reduction.compare(run([3, 3], gap / 2))
+    assert reduction.mode_order(run([4, 3], 0.4996)) is None
     tube = {"critical": {"growth_um": 5.36, "modes": [{"wave_vector": [8, 1]}], "discretization_error": None},
             "reduced": {"growth_um": 5.13, "wave_vectors": [[10, 0]], "kind": "wrinkles",
                         "mode_crossings": [{"wave_vectors": [[10, 0]], "growth_um": 5.13}]}}
-    assert reduced.mode_order(tube) == {"wave_vector": [8, 1], "in_1d": False}
-    assert "an axial wave" in reduced.compare(tube)
+    assert reduction.mode_order(tube) == {"wave_vector": [8, 1], "in_1d": False}
+    assert "an axial wave" in reduction.compare(tube)

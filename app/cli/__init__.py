@@ -117,10 +117,10 @@ def cmd_converge(args) -> int:
 
 
 def cmd_reduced(args) -> int:
-    from app.workflows import reduced
+    from app.workflows import reduction
 
     comm, cfg, outdir = _prepare(args, "-reduced", reduced=True, sizes=False, inputs=False)
-    return reduced.command(cfg, outdir, comm)
+    return reduction.command(cfg, outdir, comm)
 
 
 def cmd_study(args) -> int:

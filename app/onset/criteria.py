@@ -33,7 +33,7 @@ class Criterion:
     #: followed branch: the mode is a displacement whose cells' fluid content must change with it
     #: (app.onset.branching adds the flux of that change where fluid can move)
     adds_content: ClassVar[bool] = False
-    #: the permeable surface's short-wave check under this criterion (app.onset.surface: drained or undrained)
+    #: the permeable surface's short-wave check under this criterion (app.onset.surface_check: drained or undrained)
     surface: ClassVar[str] = "drained"
 
     def operator(self, problem, params: dict):

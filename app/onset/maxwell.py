@@ -8,7 +8,7 @@ brackets the sign change, either scanning the whole run (the coarsest mesh) or m
 mesh's answer, halves the bracket, then closes it by Illinois regula falsi. A growing crease's bracket is
 moved onto the branch of the crease of least energy before it is closed; a bracket whose negative end is a
 far deeper fold is a snap, an upper bound of the onset. :func:`level_onset` is the whole search on one
-:class:`~app.onset.creases.CreaseTrial`; the workflow (:mod:`app.workflows.creases`) runs it on three meshes
+:class:`~app.onset.creases.CreaseTrial`; the workflow (:mod:`app.workflows.crease_onset`) runs it on three meshes
 and extrapolates.
 """
 

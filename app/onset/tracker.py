@@ -20,7 +20,7 @@ from app.onset.criteria import CRITERIA, DEFAULT, Criterion
 from app.onset.crossing import Crossing
 from app.onset.policy import AfterCrossing, CrossingPolicy
 from app.onset.screening import StabilityScreen
-from app.onset.surface import SurfaceCheck
+from app.onset.surface_check import SurfaceCheck
 
 
 @dataclass(frozen=True)
@@ -37,7 +37,7 @@ class StabilitySettings:
     criterion: str = DEFAULT  # which perturbations count (app.onset.criteria)
     params: dict = field(default_factory=lambda: {"tau": 1e-2})  # the criterion's parameters (its keys)
     imperfection: float = 0.01  # after_onset = branch: the mode's surface amplitude / film thickness
-    surface_check: bool = True  # the permeable surface's short-wave limit every step (app.onset.surface)
+    surface_check: bool = True  # the permeable surface's short-wave limit every step (app.onset.surface_check)
     branch_modes: str = "1"  # after_onset = branch: which of the onset's crossing modes the switch adds ("1+2")
 
     @property
@@ -82,7 +82,7 @@ class OnsetTracker:
         self.limits: dict = {}  # the other criteria's verdicts at the first crossing's unstable end
         self.branch = None  # app.onset.branching.BranchSwitcher with after_onset = "branch"
         self.restabilized: list[dict] = []  # on a branch: where the negative count fell
-        self.surface = None  # app.onset.surface.SurfaceCheck: the permeable surface's short-wave limit
+        self.surface = None  # app.onset.surface_check.SurfaceCheck: the permeable surface's short-wave limit
         self.surface_onset: dict | None = None
         if settings.surface_check and problem.diffusion and problem.loading.surface_term \
                 and problem.geo.facets_with_role("permeable"):

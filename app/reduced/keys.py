@@ -1,5 +1,5 @@
 """The [reduced] keys: how the exact 1D reduction beside a run and in ``hydrobuckle reduced`` is resolved
-(app/workflows/reduced.py reads them into :class:`app.reduced.solve.Settings`)."""
+(app/workflows/reduction.py reads them into :class:`app.reduced.solve.Settings`)."""
 
 from __future__ import annotations
 

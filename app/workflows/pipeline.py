@@ -10,9 +10,9 @@ itself) and take no pipeline steps.
 from __future__ import annotations
 
 from app import config
-from app.workflows.creases import add_creases
+from app.workflows.crease_onset import add_creases
 from app.workflows.error_estimate import add_error_estimate
-from app.workflows.reduced import add_reduced
+from app.workflows.reduction import add_reduced
 from app.workflows.run import simulate
 
 

@@ -24,7 +24,7 @@ from app.io.checkpoint import CheckpointError
 from app.io.writes import ResultWriteError
 from app.reduced.solve import Interrupted
 from app.reduced.transient import TransientFailed
-from app.workflows import preflight, progress, reduced
+from app.workflows import preflight, progress, reduction
 from app.workflows.pipeline import run_case
 from app.workflows.reruns import COMPLETE, finished, resumable  # noqa: F401 - COMPLETE: read by the CLI
 from app.workflows.variants import variant
@@ -222,12 +222,12 @@ def _run_reduced(case: Case, log) -> None:
     """One case's exact 1D reduction into its directory (summary.json last); a transient that fails leaves
     error.txt and a failed summary, the other cases go on."""
     try:
-        reduced.run(case.cfg, case.outdir, stop=lambda: interrupt._received != 0)
+        reduction.run(case.cfg, case.outdir, stop=lambda: interrupt._received != 0)
     except Interrupted:
         log.info(f"study: {case.label}: interrupted (no summary.json)")
     except TransientFailed as err:
         log.info(f"study: {case.label}: the 1D transient failed: {err}")
-        reduced.write_failure(case.outdir, case.cfg, str(err))
+        reduction.write_failure(case.outdir, case.cfg, str(err))
         (case.outdir / "error.txt").write_text(f"TransientFailed: {err}\n")
 
 

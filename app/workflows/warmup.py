@@ -16,7 +16,7 @@ from pathlib import Path
 
 from app import config, factory
 from app.reduced.solve import compile_forms
-from app.workflows.reduced import settings
+from app.workflows.reduction import settings
 from app.workflows.run import simulate
 
 # (label, user config): each differs from the others in at least one compiled form

@@ -28,7 +28,7 @@ from app.onset.maxwell import level_onset, load_text
 from app.reduced.content import content_profile
 from app.reduced.transient import TransientFailed
 from app.workflows.convergence import richardson
-from app.workflows.reduced import settings as reduced_settings
+from app.workflows.reduction import settings as reduced_settings
 
 LEVEL_RATIO = 2  # crease_resolution halves from one level to the next coarser one
 TIP_RADIUS = 1.5  # the finest elements reach this many crease lengths around the tip
