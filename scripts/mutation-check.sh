@@ -141,8 +141,8 @@ MUTATIONS = [
      "self.weight = np.concatenate([count / 2.0, np.zeros(m)])",
      ["tests/test_contact.py::test_a_slit_pressed_onto_itself_is_its_half_with_a_symmetry_line"]),
     ("the drained criterion leaves out the contact's Hessian", "app/solvers/stability.py",
-     r'self\.A = compat\.create_matrix\(hessian\.form\)\n        self\.contact = getattr\(hessian, "contact", None\)',
-     'self.A = compat.create_matrix(hessian.form)\n        self.contact = None',
+     r'self\.A = fem_petsc\.create_matrix\(hessian\.form\)\n        self\.contact = getattr\(hessian, "contact", None\)',
+     'self.A = fem_petsc.create_matrix(hessian.form)\n        self.contact = None',
      ["tests/test_contact.py::test_a_tube_passage_folds_all_around_and_is_followed_in_contact"]),
     ("the swelling crease's grand potential without the bath's work", "app/model/equilibrium.py",
      r"G = \(bulk - self\.mu_bar \* c\) \* p\.dx", "G = bulk * p.dx",
@@ -207,7 +207,7 @@ MUTATIONS = [
      r"\(self\.content\(t, self\._y\) \* self\._w\)\.sum\(axis=1\)", "self.content(t, self._y)[:, 0]",
      ["tests/test_creases_swelling.py::"
       "test_a_trial_on_the_runs_transient_holds_its_uniform_content_and_quasi_statically_is_the_undrained_one"]),
-    ("a transient's content profile from the flux, not its derivative", "app/reduced/transient.py",
+    ("a transient's content profile from the flux, not its derivative", "app/reduced/content.py",
      r"coefficients\[m, i\] = -np\.polyder\(np\.polyfit\(xi, Q\[i \* d:i \* d \+ d \+ 1\], d\)\) / h",
      "coefficients[m, i] = -np.polyfit(xi, Q[i * d:i * d + d + 1], d)[1:] / h",
      ["tests/test_creases_swelling.py::"
