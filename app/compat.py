@@ -128,20 +128,6 @@ def gmsh_model_to_mesh(model, comm, rank: int = 0, gdim: int = 2):
     return gmshio.model_to_mesh(model, comm, rank, gdim=gdim)
 
 
-def dirichlet_function_on_cells(W_sub, domain):
-    """Dirichlet condition on every local cell's dofs of a (cell-wise, e.g. DG0) sub-space, its values from a
-    Function the caller sets: (condition, function). dolfinx 0.9 locates dofs on cells only once the
-    cell-to-cell connectivity exists (0.5 does not ask for it)."""
-    tdim = domain.topology.dim
-    domain.topology.create_connectivity(tdim, tdim)
-    imap = domain.topology.index_map(tdim)
-    cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
-    V, _ = W_sub.collapse()
-    g = fem.Function(V)
-    dofs = fem.locate_dofs_topological((W_sub, V), tdim, cells)
-    return fem.dirichletbc(g, dofs, W_sub), g
-
-
 def assemble_residual_into(b, L, a, bcs, x, lifting: bool = True):
     """b = L(x) with Dirichlet rows set to x_bc - g; with ``lifting`` also b += K (g - x) on the
     constrained columns (the standard Newton lifting; zero when x already meets the conditions). The lifting's

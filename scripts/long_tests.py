@@ -18,7 +18,7 @@ OUT = Path(__file__).resolve().parents[1] / "tests" / "data" / "long-tests.txt"
 #: long tests that stay on both stacks, and why
 ON_BOTH = {
     "tests/test_creases_swelling.py::test_the_drained_crease_costs_less_than_the_undrained_one_and_comes_first":
-        "the one quick test of the undrained crease's hold on every cell (compat.dirichlet_function_on_cells, "
+        "the one quick test of the undrained crease's hold on every cell (fem_utils.dirichlet_function_on_cells, "
         "which differs between dolfinx 0.5 and 0.9)",
 }
 

@@ -136,7 +136,7 @@ class DrainedEquilibrium:
         self._V_u, self._u_dofs = fem_utils.collapse(self.space.sub(0))
         self.kept, self._content = [], None
         if fluid == "undrained":  # every cell's content held at the flat state's
-            bc, self._content = compat.dirichlet_function_on_cells(self.space.sub(1), p.domain)
+            bc, self._content = fem_utils.dirichlet_function_on_cells(self.space.sub(1), p.domain)
             self.kept = [bc]
             _, self._c_dofs = fem_utils.collapse(self.space.sub(1))
 

@@ -67,9 +67,10 @@ def size_config(name: str, overrides: list[str]) -> dict:
     """The config of a bench size: the default config (with ``overrides``) at a named size's scale of its element
     size, or at an element size in mm; its film layers scaled inversely, so the elements keep their shape."""
     cfg = config.resolve({}, list(overrides))
-    given = _element_size(name)
-    scale = SIZES[name] if given is None else given / cfg["mesh"]["element_size"]
-    return variant(cfg, {"mesh.element_size": given if given is not None else cfg["mesh"]["element_size"] * scale,
+    given, base = _element_size(name), cfg["mesh"]["element_size"]
+    scale = SIZES[name] if given is None else given / base
+    size = base * scale if given is None else given
+    return variant(cfg, {"mesh.element_size": size,
                          "mesh.film_layers": max(1, round(cfg["mesh"]["film_layers"] / scale)),
                          "output.plot": False, "stability.error_estimate": False,
                          "output.checkpoint_every": 0})  # timings of the solver, not of checkpoints
