@@ -81,7 +81,9 @@ def test_the_crease_onset_of_a_compressed_layer_is_hong_zhao_suos_before_biots(s
     assert onset["applied_strain"] == pytest.approx(HZS_STRAIN, rel=0.015)
     assert onset["applied_strain_error"] < 0.01 * HZS_STRAIN
     assert s["status"] == "buckled" and s["critical"]["applied_strain"] > onset["applied_strain"] + 0.05
-    assert s["creases"]["first"] == "crease"
+    # the block is its own film: the film's own onset is the run's, and nucleation says crease as well
+    assert s["creases"]["first"] == {"least_energy": "crease", "nucleation": "crease"}
+    assert s["creases"]["film_onset"]["onset"] == onset
     assert s["creases"]["penetration_mm"] < 0.01 * 0.05 / 16  # the mirror's gap: under 1% of the tip's element
     levels = [lv for lv in s["creases"]["levels"] if not lv.get("pilot")]
     assert [lv["resolution"] for lv in levels] == [4, 8, 16]
@@ -217,6 +219,43 @@ def test_a_trial_that_fails_is_reported_and_the_run_kept(shared_tmp, comm, monke
     s = run_case(cfg, shared_tmp, comm, progress=False)
     assert s["status"] == "stable"  # no linear onset up to a strain of 0.12
     assert s["creases"] == {"error": "the trial crease did not close at t = 0.025 s (test)"}
+
+
+def test_the_nucleation_verdict_compares_the_films_own_onset_with_the_wrinkle(comm, monkeypatch):
+    """summary.json creases.first carries both verdicts. By least energy the run's crease (grown to its own
+    size) is compared with the wrinkle; by nucleation the film's own onset, a trial crease on a homogeneous
+    block of the film's law (every layer the film's material, geometry and loading the run's). With the
+    ratio-2 bilayer's measured onsets (docs/creases.md: crease 0.2697, homogeneous block 0.35475, wrinkle
+    0.3041, strain = 0.6 t) the two verdicts differ: crease, wrinkle. A run whose layers share one law reuses
+    its own onset (one trial, not two)."""
+    calls = []
+
+    def onset(cfg, comm, log=None, critical=None):
+        calls.append(cfg)
+        t = 0.2697 / 0.6 if len(calls) == 1 else 0.35475 / 0.6
+        return {"onset": {"time": t, "time_error": 1e-3, "applied_strain": 0.6 * t, "applied_strain_error": 6e-4},
+                "levels": []}
+
+    monkeypatch.setattr(workflow, "crease_onset", onset)
+    cfg = block("material.film.modulus_ratio=2", "stability.creases=true")
+    summary = {"critical": {"time": 0.3041 / 0.6, "applied_strain": 0.3041}}
+    workflow.add_creases(summary, cfg, comm)
+    assert summary["creases"]["first"] == {"least_energy": "crease", "nucleation": "wrinkle"}
+    assert len(calls) == 2 and calls[0] is cfg
+    film = factory.layer_materials(cfg)["film"]
+    assert factory.layer_materials(calls[1]) == {"film": film, "substrate": film}
+    assert {k: calls[1][k] for k in ("geometry", "mesh", "loading", "time", "stability")} == \
+        {k: cfg[k] for k in ("geometry", "mesh", "loading", "time", "stability")}
+    line = workflow.describe(summary["creases"], summary["critical"])
+    assert "by least energy the crease comes first" in line and "by nucleation wrinkles come first" in line
+    calls.clear()
+    same = block("stability.creases=true")
+    summary = {"critical": {"time": 0.4588 / 0.6, "applied_strain": 0.4588}}
+    workflow.add_creases(summary, same, comm)
+    assert len(calls) == 1 and summary["creases"]["film_onset"]["onset"] == summary["creases"]["onset"]
+    assert summary["creases"]["first"] == {"least_energy": "crease", "nucleation": "crease"}
+    with pytest.raises(CreaseFailed, match="named layers"):
+        workflow.homogeneous({**cfg, "material": {**cfg["material"], "layers": {"cap": {"modulus_ratio": 3.0}}}})
 
 
 def test_a_bracket_that_ends_in_a_snap_bounds_the_onset_from_above():

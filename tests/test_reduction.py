@@ -302,3 +302,28 @@ def test_mode_operator_of_a_homogeneous_layer_at_short_waves_is_the_surface_cond
 
     lam = brentq(margin, 2.5, theory.BIOT_CUBIC_RATIO - 1e-3, xtol=1e-10)
     assert lam == pytest.approx(theory.surface_critical_stretch(gel, drained=criterion == "drained"), rel=3e-5)
+
+
+def test_the_crossover_bisection_finds_where_the_onset_meets_a_time(monkeypatch, capsys):
+    """``hydrobuckle reduced --crossover KEY LO HI TIME``: the value of KEY at which the 1D onset time equals
+    TIME, by bisection to 1e-3 of the value. With an onset time 1/r of the key r (a stand-in for the 1D runs)
+    and TIME 0.4 the answer is r = 2.5 within its own error bar, and that bar is at most 1e-3 of it; a TIME
+    no value in the range reaches gives no value. Bad input (LO >= HI, a TIME beyond time.end, an unknown
+    key) exits 2 with one line naming it, before any 1D run."""
+    from app import cli
+
+    cfg = config.load("configs/bilayer-creases.toml")
+    key = "material.film.modulus_ratio"
+    monkeypatch.setattr(reduction, "onset_time",
+                        lambda c: (1.0 / c["material"]["film"]["modulus_ratio"], "N = 2"))
+    found = reduction.crossover(cfg, key, 1.0, 5.0, 0.4, lambda msg: None)
+    assert abs(found["value"] - 2.5) <= found["error"] <= 1e-3 * 2.5
+    assert reduction.crossover(cfg, key, 1.0, 2.0, 0.4, lambda msg: None)["value"] is None
+    path = "configs/bilayer-creases.toml"
+    for bad, word in ((["5", "1", "0.4"], "LO < HI"), (["1", "5", "2"], "time.end"), (["1", "x", "0.4"], "numbers")):
+        capsys.readouterr()
+        assert cli.main(["reduced", path, "--crossover", key, *bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--crossover" in err[0] and word in err[0]
+    assert cli.main(["reduced", path, "--crossover", "material.film.nope", "1", "5", "0.4"]) == 2
+    assert "material.film.nope" in capsys.readouterr().err

@@ -104,6 +104,50 @@ def test_study_tables_print_each_studys_results_and_its_1d_reduction(shared_tmp,
         assert len(err) == 1 and "nope: no such directory" in err[0]
 
 
+def test_the_crease_study_tabulates_both_verdicts_and_interpolates_the_crossovers(shared_tmp, capsys):
+    """``study bilayer-creases``: each case's row carries its crease onset, the film's own onset and both
+    verdicts from summary.json; ``study --tables`` prints them and the crossovers, where the crease's onset
+    (the run's; the film's own) equals the wrinkling onset, interpolated linearly between the rows that
+    change sign. Onsets linear in the ratio r: crease 0.5 - 0.05 r, film's own 0.59 (a constant), wrinkle
+    0.8 - 0.15 r cross at r = 3 and r = 1.4 exactly."""
+    spec, cases = studies.study_cases("bilayer-creases", shared_tmp / "creases", "1,2,4", [])
+    assert spec.creases and all(c.cfg["stability"]["creases"] for c in cases)
+    assert cases[1].cfg["material"]["film"]["modulus_ratio"] == 2.0
+    for case in cases:
+        r = case.value
+        t = {"crease": 0.5 - 0.05 * r, "film": 0.59, "wrinkle": 0.8 - 0.15 * r}
+        first = {"least_energy": "crease" if t["crease"] < t["wrinkle"] else "wrinkle",
+                 "nucleation": "crease" if t["film"] < t["wrinkle"] else "wrinkle"}
+        summary = {"status": "buckled", "critical": {"time": t["wrinkle"], "applied_strain": 0.6 * t["wrinkle"]},
+                   "reduced": {"time": t["wrinkle"] - 1e-3},
+                   "creases": {"onset": {"time": t["crease"], "time_error": 1e-4, "applied_strain": 0.6 * t["crease"],
+                                         "applied_strain_error": 6e-5},
+                               "levels": [{"depth_mm": 0.09}, {"depth_mm": 0.1}],
+                               "film_onset": {"onset": {"time": t["film"], "time_error": 2e-4}}, "first": first}}
+        if MPI.COMM_WORLD.rank == 0:
+            case.outdir.mkdir(parents=True)
+            (case.outdir / "summary.json").write_text(json.dumps(summary))
+    MPI.COMM_WORLD.barrier()
+    rows = studies.collect(cases, spec.param)
+    assert [(r["first_least_energy"], r["first_nucleation"]) for r in rows] == \
+        [("crease", "crease"), ("crease", "wrinkle"), ("wrinkle", "wrinkle")]
+    assert rows[2]["crease_strain"] == pytest.approx(0.18) and rows[0]["crease_depth_mm"] == 0.1
+    assert rows[0]["film_crease_t"] == 0.59 and rows[0]["t_reduced"] == pytest.approx(0.649)
+    found = studies.crossovers(rows)
+    assert found["least_energy"] == pytest.approx(3.0) and found["nucleation"] == pytest.approx(1.4)
+    if MPI.COMM_WORLD.rank == 0:
+        studies.write_tables(rows, shared_tmp / "creases", "test", spec.param)
+        (shared_tmp / "tables-creases").mkdir()
+        (shared_tmp / "creases").rename(shared_tmp / "tables-creases" / "bilayer-creases")
+    MPI.COMM_WORLD.barrier()
+    capsys.readouterr()
+    assert cli.main(["study", "--tables", str(shared_tmp / "tables-creases")]) == 0
+    out = capsys.readouterr().out
+    assert "| - | 2.0 | buckled | 0.3000 | 0.5000 | 0.4990 | 0.2400 | 0.0001 | 0.100 | 0.4000 | 0.5900 | 0.0002 | " \
+        "crease | wrinkle | - |" in out
+    assert "Crossover by least energy (" in out and "modulus_ratio = 3\n" in out and "modulus_ratio = 1.4\n" in out
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(MPI.COMM_WORLD.size < 2, reason="groups of ranks need several ranks")
 def test_rank_groups_give_the_same_results_as_one_by_one(shared_tmp):

@@ -119,6 +119,12 @@ def cmd_converge(args) -> int:
 def cmd_reduced(args) -> int:
     from app.workflows import reduction
 
+    if args.crossover:
+        comm, cfg, _ = _prepare(args, None, lambda cfg: reduction.crossover_args(cfg, args.crossover), reduced=True,
+                                sizes=False, inputs=False)
+        key, lo, hi, target = reduction.crossover_args(cfg, args.crossover)
+        _say(comm, "hydrobuckle: " + reduction.crossover_command(cfg, key, lo, hi, target, comm))
+        return EXIT_OK
     comm, cfg, outdir = _prepare(args, "-reduced", reduced=True, sizes=False, inputs=False)
     return reduction.command(cfg, outdir, comm)
 

@@ -94,8 +94,13 @@ def parser() -> argparse.ArgumentParser:
                       help="levels coarser than the config (cheap error estimate of the config itself)")
     conv.add_argument("--force", action="store_true", help="run every level anew (a rerun otherwise keeps the "
                       "levels an earlier converge finished and resumes an interrupted one from its checkpoint)")
-    _add(sub, "reduced", "the exact 1D reduction of a bilayer or circular-tube config: g_c, N_c and the margin "
-         "curve in seconds (docs/reduction.md)", output="result directory (default results/<config name>-reduced)")
+    red = _add(sub, "reduced", "the exact 1D reduction of a bilayer or circular-tube config: g_c, N_c and the "
+               "margin curve in seconds (docs/reduction.md)",
+               output="result directory (default results/<config name>-reduced)")
+    red.add_argument("--crossover", nargs=4, metavar=("KEY", "LO", "HI", "TIME"),
+                     help="instead: the value of KEY in [LO, HI] at which the 1D onset time equals TIME [s] (e.g. "
+                          "a run's creases.film_onset: the crossover by nucleation), by bisection; printed, no "
+                          "result directory")
     for command in (st, sw, conv, be):  # refused with a line that says how these commands continue
         command.add_argument("--resume", nargs="?", const="", default=None, help=argparse.SUPPRESS)
     return p

@@ -29,6 +29,7 @@ from app.reduced.content import content_profile
 from app.reduced.transient import TransientFailed
 from app.workflows.convergence import richardson
 from app.workflows.reduction import settings as reduced_settings
+from app.workflows.variants import variant
 
 LEVEL_RATIO = 2  # crease_resolution halves from one level to the next coarser one
 TIP_RADIUS = 1.5  # the finest elements reach this many crease lengths around the tip
@@ -53,9 +54,59 @@ def add_creases(summary: dict, cfg: dict, comm) -> None:
         log.warning(f"creases: {err}")
         summary.setdefault("creases", {})["error"] = str(err)
         return
-    block["first"] = _first(block["onset"], summary.get("critical"), block.get("wrinkling_equilibrium"))
+    critical, wrinkling = summary.get("critical"), block.get("wrinkling_equilibrium")
+    try:
+        block["film_onset"] = film_onset(cfg, comm, block, log.info)
+    except CreaseFailed as err:
+        log.warning(f"creases: the film's own crease onset: {err}")
+        block["film_onset"] = {"error": str(err)}
+    film = block["film_onset"]
+    block["first"] = {"least_energy": _first(block["onset"], critical, wrinkling),
+                      "nucleation": (None if "error" in film else
+                                     _first(film.get("onset") and _by_time(film["onset"]), critical, wrinkling))}
     summary.setdefault("creases", {}).update(block)
-    log.info("creases: " + describe(block, summary.get("critical")))
+    log.info("creases: " + describe(block, critical))
+
+
+def homogeneous(cfg: dict) -> dict:
+    """The config of a homogeneous block of the film's law: every layer made of the film's material (its
+    parameters as the substrate's, the film's own table unset), the run's geometry, mesh, loading and
+    trial keys otherwise. Raises :class:`CreaseFailed` for a mesh with further named layers."""
+    if cfg["material"].get("layers"):
+        raise CreaseFailed("a mesh with named layers beyond film and substrate has no single surface layer "
+                           "whose own onset this computes")
+    changes = {f"material.{k}": v for k, v in config.film_overrides(cfg).items()}
+    changes.update({f"material.film.{k}": None for k in cfg["material"]["film"]})
+    return variant(cfg, changes)
+
+
+def film_onset(cfg: dict, comm, block: dict, log=lambda msg: None) -> dict:
+    """The film's own crease onset (a dict for summary.json ``creases.film_onset``): the onset of a crease
+    small against the film, which sees a homogeneous body of the film's law. A flawless film nucleates creases
+    there, not at the least-energy onset of a crease grown over a barrier (docs/creases.md, "Nucleation or
+    least energy"). Computed as the trial crease's onset on a homogeneous block of the film's law
+    (:func:`homogeneous`) under the run's loading, three levels and an error bar like the run's own; a run
+    whose layers already share one law reuses its own onset. On the run's own transient (crease_fluid =
+    "transient") the block's transient is not the run's, so there the small-crease limit on the run's surface
+    (the surface's stretch ratio reaching Hong, Zhao & Suo's) stands for it."""
+    if "small_crease_limit" in block:
+        limit = block["small_crease_limit"]
+        return {"onset": limit and {"time": limit["time"], "growth_mm": limit["growth_mm"], "fluid": "transient"},
+                "method": "the small-crease limit on the run's own transient surface (stretch ratio "
+                          f"{theory.CREASE_STRETCH_RATIO:.4g}, Hong, Zhao & Suo)"}
+    if config.film_overrides(cfg) == config.substrate_parameters(cfg) and not cfg["material"].get("layers"):
+        return {"onset": block["onset"], "method": "the run's own onset: its layers share one law"}
+    block_cfg = homogeneous(cfg)
+    log("creases: the film's own crease onset, on a homogeneous block of its law")
+    own = crease_onset(block_cfg, comm, lambda msg: log(msg.replace("creases:", "creases (film's own):", 1)))
+    return {"onset": own["onset"], "levels": own["levels"], "method": "the trial crease on a homogeneous block of the "
+            "film's law under the run's loading (every layer the film's material)"}
+
+
+def _by_time(onset: dict) -> dict:
+    """A film's own onset compared on the load's time: its block's flat growth is not the run's, while the
+    film's state at a time is (the same strain, or the same bath)."""
+    return {k: v for k, v in onset.items() if k in ("time", "time_error", "snap")}
 
 
 def crease_onset(cfg: dict, comm, log=lambda msg: None, critical: dict | None = None) -> dict:
@@ -254,14 +305,43 @@ def describe(block: dict, critical: dict | None) -> str:
         return line + (f"; the run's wrinkling onset (growth {wrinkling['growth_mm'] * 1e3:.5g} um) is far from "
                        f"equilibrium with the bath (there: {wrinkling['equilibrium_growth_mm'] * 1e3:.5g} um), so "
                        "these equilibrium states do not say which comes first (a quasi-static ramp would)")
+    return line + _energy_verdict(block, critical) + _nucleation_verdict(block, critical)
+
+
+def _energy_verdict(block: dict, critical: dict | None) -> str:
+    onset = block["onset"]
     if onset is None:
-        return line
+        return ""
     measure = _measure(onset)
     unit, scale, at = ("um", 1e3, "a growth of") if measure == "growth_mm" else ("s", 1.0, "t =")
     if critical is None:
-        return line + "; no wrinkling onset within the run: the crease comes first"
+        return "; no wrinkling onset within the run: the crease comes first"
     where = f"the wrinkling onset at {at} {critical[measure] * scale:.5g} {unit}"
-    if block["first"] == "crease":
-        return line + f", before {where}: the crease comes first"
-    return line + (f", after {where} ({onset[measure] / critical[measure]:.3g} x its "
-                   f"{'growth' if measure == 'growth_mm' else 'time'}): wrinkles come first")
+    if _verdict(block, "least_energy") == "crease":
+        return f", before {where}: by least energy the crease comes first"
+    return (f", after {where} ({onset[measure] / critical[measure]:.3g} x its "
+            f"{'growth' if measure == 'growth_mm' else 'time'}): by least energy wrinkles come first")
+
+
+def _verdict(block: dict, criterion: str) -> str | None:
+    first = block.get("first")
+    return first.get(criterion) if isinstance(first, dict) else first
+
+
+def _nucleation_verdict(block: dict, critical: dict | None) -> str:
+    """The log's sentence on the film's own onset against the wrinkling onset (empty without one)."""
+    film = block.get("film_onset") or {}
+    own = film.get("onset")
+    if "error" in film or not film:
+        return ""
+    if own is None:
+        return ("; the film's own crease onset lies beyond the run"
+                + (": by nucleation wrinkles come first" if _verdict(block, "nucleation") == "wrinkle" else ""))
+    err = f" +- {own['time_error']:.2g}" if "time_error" in own else ""
+    text = f"; the film's own crease onset (a crease small against the film) at t = {own['time']:.5g}{err} s"
+    verdict = _verdict(block, "nucleation")
+    if verdict is None:
+        return text + ": by nucleation undecided"
+    return text + (", before the wrinkling onset: by nucleation creases come first" if verdict == "crease" else
+                   (", after the wrinkling onset: by nucleation wrinkles come first" if critical else
+                    ": by nucleation wrinkles come first"))

@@ -16,6 +16,7 @@ from app import config, factory, interrupt, logging_setup
 from app.io import writes
 from app.reduced.solve import Estimate, Interrupted, Settings, converged
 from app.reduced.transient import Resolution, TransientFailed
+from app.workflows.variants import variant
 
 SOLVER = "reduced-1d"
 
@@ -289,3 +290,73 @@ def command(cfg: dict, outdir: Path, comm) -> int:
         code = comm.bcast(code, root=0)
         interrupt.pending(comm)  # the exit code of a signal (130 / 143), agreed by every rank
     return code
+
+
+CROSSOVER_WIDTH = 1e-3  # the bisection stops once the bracket is this fraction of the value
+
+
+def crossover_args(cfg: dict, raw: list[str]) -> tuple[str, float, float, float]:
+    """``reduced --crossover KEY LO HI TIME`` checked: a known numeric key, 0 < LO < HI, TIME in (0, time.end];
+    each value a valid config (a ConfigError naming the key otherwise)."""
+    key, *numbers = raw
+    try:
+        lo, hi, target = (float(x) for x in numbers)
+    except ValueError:
+        raise config.ConfigError("--crossover", f"LO HI TIME must be numbers (got {' '.join(numbers)})") from None
+    if not 0 < lo < hi:
+        raise config.ConfigError("--crossover", f"needs 0 < LO < HI (got {lo:g}, {hi:g})")
+    if not 0 < target <= cfg["time"]["end"]:
+        raise config.ConfigError("--crossover", f"TIME must lie in (0, time.end = {cfg['time']['end']:g}] s "
+                                 f"(got {target:g})")
+    for v in (lo, hi):
+        config.validate(_with(cfg, key, v))
+    return key, lo, hi, target
+
+
+def _with(cfg: dict, key: str, value: float) -> dict:
+    return variant(cfg, {key: value, "reduced.horizon": 0.0})
+
+
+def onset_time(cfg: dict) -> tuple[float | None, str]:
+    """The 1D onset time of ``cfg`` and what goes first (the wrinkle count, or "surface")."""
+    block = compute(cfg)
+    n = block["wrinkle_count"]
+    return block["time"], "surface" if n is None else f"N = {n:g}"
+
+
+def crossover(cfg: dict, key: str, lo: float, hi: float, target: float, log) -> dict:
+    """The value of ``key`` in [lo, hi] at which the exact 1D onset time equals ``target`` (bisection on the
+    onset's sign against it, to CROSSOVER_WIDTH; each value a 1D run of seconds). {"value", "error", "rows"};
+    value None when the onset does not cross ``target`` between lo and hi (an onset beyond time.end counts
+    as later than any target)."""
+    rows = []
+
+    def side(v):
+        t, what = onset_time(_with(cfg, key, v))
+        rows.append({"value": v, "time": t, "first": what})
+        log(f"reduced: {key} = {v:.6g}: onset at " + (f"t = {t:.6g} s ({what})" if t is not None else
+                                                       "none up to time.end"))
+        return t is None or t > target
+
+    late_lo, late_hi = side(lo), side(hi)
+    if late_lo == late_hi:
+        return {"value": None, "error": None, "rows": rows}
+    while hi - lo > CROSSOVER_WIDTH * abs(hi):
+        mid = 0.5 * (lo + hi)
+        if side(mid) == late_lo:
+            lo = mid
+        else:
+            hi = mid
+    return {"value": 0.5 * (lo + hi), "error": 0.5 * (hi - lo), "rows": rows}
+
+
+def crossover_command(cfg: dict, key: str, lo: float, hi: float, target: float, comm) -> str:
+    """``hydrobuckle reduced --crossover``: rank 0 bisects, the line is every rank's."""
+    log = logging_setup.get()
+    found = crossover(cfg, key, lo, hi, target, log.info) if comm.rank == 0 else None
+    found = comm.bcast(found, root=0)
+    if found["value"] is None:
+        return (f"the 1D onset does not cross t = {target:g} s between {key} = {lo:g} and {hi:g} (onsets: "
+                + ", ".join("none" if r["time"] is None else f"{r['time']:.5g} s" for r in found["rows"]) + ")")
+    return (f"the 1D onset time equals {target:g} s at {key} = {found['value']:.5g} +- {found['error']:.2g} "
+            f"({len(found['rows'])} 1D runs)")

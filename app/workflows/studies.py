@@ -45,6 +45,7 @@ class StudySpec:
     scale_mesh_with_film: bool = True
     isomodes: bool = False
     paper_trend: str = ""
+    creases: bool = False  # rows carry the crease onset and both verdicts (stability.creases)
 
 
 def _bilayer(**kw):
@@ -89,6 +90,17 @@ STUDIES = {s.name: s for s in [
                                      "geometry.kind": "elliptic-tube"},
               "geometry.aspect_ratio", [1.0, 1.1, 1.2, 1.3, 1.4, 1.5],
               paper_trend="g_c,x rises slightly with a/b; wrinkles fade where the substrate is thinner"),
+    StudySpec("bilayer-creases", "compressed bilayer (configs/bilayer-creases.toml: film 0.05 on 0.95 mm, fluid "
+              "frozen): the crease onset against the wrinkling onset over gamma_f/gamma_s, which comes first by "
+              "least energy and by nucleation",
+              {"geometry.kind": "bilayer", "geometry.length": 1.0, "geometry.substrate_thickness": 0.95,
+               "geometry.film_thickness": 0.05, "mesh.element_size": 0.025, "mesh.film_layers": 4,
+               "mesh.substrate_grading": 1.1, "loading.kind": "compression", "loading.compression_strain": 0.6,
+               "time.end": 1.0, "time.dt_initial": 0.02, "time.dt_max": 0.02, "stability.creases": True,
+               "stability.crease_size": 0.0125, "stability.crease_resolution": 16, "output.fields": False},
+              "material.film.modulus_ratio", [1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0], scale_mesh_with_film=False,
+              creases=True, paper_trend="not the paper's: the crease falls more slowly with the ratio than the "
+              "wrinkle; crossover by least energy near 3.5, by nucleation near 1.55 (docs/creases.md)"),
 ]}
 
 
@@ -237,7 +249,10 @@ def _checkpoint(case: Case, comm, log):
 
 
 COLUMNS = ("series", "parameter", "value", "status", "g_c_um", "g_c_error_um", "N_c", "t_c", "mu_c",
-           "crossings", "wall_time_s", "directory", "solver", "onset", "end_time", "end_energy", "end_pattern")
+           "crossings", "wall_time_s", "directory", "solver", "onset", "end_time", "end_energy", "end_pattern",
+           "strain_c", "t_reduced", "crease_t", "crease_t_error", "crease_strain", "crease_strain_error",
+           "crease_depth_mm", "film_crease_t", "film_crease_t_error", "first_least_energy", "first_nucleation")
+CREASE_COLUMNS = COLUMNS[COLUMNS.index("strain_c"):]
 
 
 def collect(cases: list[Case], param: str) -> list[dict]:
@@ -246,7 +261,8 @@ def collect(cases: list[Case], param: str) -> list[dict]:
         row = {"series": case.series, "parameter": param, "value": case.value, "status": "missing",
                "g_c_um": None, "g_c_error_um": None, "N_c": None, "t_c": None, "mu_c": None, "crossings": "",
                "wall_time_s": None, "directory": case.outdir.name, "solver": "2d", "onset": None,
-               "end_time": None, "end_energy": None, "end_pattern": None}  # a followed branch's end
+               "end_time": None, "end_energy": None, "end_pattern": None,  # a followed branch's end
+               **dict.fromkeys(CREASE_COLUMNS)}
         f = case.outdir / "summary.json"
         if f.is_file() and json.loads(f.read_text()).get("solver") == "reduced-1d":
             row.update(_reduced_row(json.loads(f.read_text())))
@@ -262,10 +278,39 @@ def collect(cases: list[Case], param: str) -> list[dict]:
                        wall_time_s=s.get("wall_time_s"), onset="wrinkles" if crit else None)
             end = (s.get("postbuckling") or {}).get("end") or {}
             row.update(end_time=end.get("time"), end_energy=end.get("grand_potential"), end_pattern=end.get("pattern"))
+            row.update(_crease_cells(s))
         elif (case.outdir / "error.txt").is_file():
             row["status"] = "failed"
         rows.append(row)
     return rows
+
+
+def _crease_cells(s: dict) -> dict:
+    """A 2D case's crease columns (stability.creases): the onset, its depth on the finest level, the film's own
+    onset, both verdicts; beside them the wrinkling onset's applied strain and the 1D reduction's onset time."""
+    crit, cr = s.get("critical") or {}, s.get("creases") or {}
+    onset = cr.get("onset") or {}
+    own = (cr.get("film_onset") or {}).get("onset") or {}
+    first = cr.get("first") if isinstance(cr.get("first"), dict) else {"least_energy": cr.get("first")}
+    depth = next((lv.get("depth_mm") for lv in reversed(cr.get("levels", [])) if lv.get("depth_mm")), None)
+    return {"strain_c": crit.get("applied_strain"), "t_reduced": (s.get("reduced") or {}).get("time"),
+            "crease_t": onset.get("time"), "crease_t_error": onset.get("time_error"),
+            "crease_strain": onset.get("applied_strain"), "crease_strain_error": onset.get("applied_strain_error"),
+            "crease_depth_mm": depth, "film_crease_t": own.get("time"), "film_crease_t_error": own.get("time_error"),
+            "first_least_energy": first.get("least_energy"), "first_nucleation": first.get("nucleation")}
+
+
+def crossovers(rows: list[dict]) -> dict:
+    """Where, between two rows of a crease study, the verdict changes: the parameter at which the crease's
+    onset (least energy: the run's; nucleation: the film's own) equals the wrinkling onset, by linear
+    interpolation of their difference in time between the two rows (None where no sign changes)."""
+    out = {}
+    for name, column in (("least_energy", "crease_t"), ("nucleation", "film_crease_t")):
+        pts = [(float(r["value"]), float(r[column]) - float(r["t_c"])) for r in rows
+               if r.get(column) not in (None, "") and r.get("t_c") not in (None, "") and not r.get("series")]
+        out[name] = next(((a + (b - a) * fa / (fa - fb)) for (a, fa), (b, fb) in zip(pts, pts[1:])
+                          if fa < 0 <= fb), None)
+    return out
 
 
 def _reduced_row(s: dict) -> dict:
