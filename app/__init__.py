@@ -16,7 +16,7 @@ Its names are imported on first use, so ``import app`` (and the command line) st
 
 import os
 
-from app.version import __version__
+from app.version import __version__  # noqa: F401 - app.__version__
 
 # PT-Scotch, dolfinx's graph partitioner on both stacks, partitions with threads, and with more than one
 # thread the same mesh on the same ranks comes out with its parts given to the ranks in either order (measured

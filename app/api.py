@@ -25,7 +25,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from app import __all__, config  # __all__: the names the package re-exports, listed once in app/__init__.py
+from app import __all__, config  # noqa: F401 - __all__: the names the package re-exports, listed once in app/__init__.py
 from app.results import Result, Study
 from app.schema import ConfigError
 

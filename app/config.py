@@ -216,11 +216,12 @@ def validate(cfg: dict) -> None:
                           + f"; allowed for {kind.name!r}: " + ", ".join(map(repr, allowed)))
     stab = cfg["stability"]
     if stab["after_onset"] == "stop" and not stab["stop_at_onset"]:
-        raise ConfigError("stability.after_onset", "= 'stop' contradicts stability.stop_at_onset = false; set one of them")
+        raise ConfigError("stability.after_onset",
+                          "= 'stop' contradicts stability.stop_at_onset = false; set one of them")
     if stab["creases"] and not (kind.creases and (loading.fluid_frozen or loading.bath_equilibrium)):
         able = [lo.name for lo in _loadings() if lo.fluid_frozen or lo.bath_equilibrium]
-        raise ConfigError("stability.creases", f"= true needs a geometry kind with a symmetry line for the trial "
-                          f"crease and a loading that moves no fluid or swells from a bath; allowed: geometry.kind = "
+        raise ConfigError("stability.creases", "= true needs a geometry kind with a symmetry line for the trial "
+                          "crease and a loading that moves no fluid or swells from a bath; allowed: geometry.kind = "
                           + " or ".join(repr(k.name) for k in _kinds() if k.creases)
                           + " with loading.kind = " + " or ".join(map(repr, able)))
     if stab["creases"] and stab["crease_fluid"] == "transient" and not loading.fluid_frozen:

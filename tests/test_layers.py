@@ -1,6 +1,6 @@
 """The module map of docs/architecture.md as a contract: import-linter's layers contract in pyproject.toml
 (a room imports only rooms below it; the base modules import none of each other; meshes/ knows only gmsh)
-holds for the code, and an upward import added to a copy of the code breaks it."""
+holds for the code, and an upward import added to a copy of the code breaks it; ruff's lint rules hold too."""
 
 from __future__ import annotations
 
@@ -27,6 +27,16 @@ def test_the_code_keeps_its_layers():
     done = on_rank0(_lint, ROOT)
     assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
     assert "2 kept, 0 broken" in done.stdout, done.stdout[-2000:]
+
+
+def test_the_code_passes_its_lint():
+    """ruff's rules of pyproject.toml (pyflakes, pycodestyle to 120 columns, import order, bugbear, pyupgrade) hold
+    on app/ and meshes/ with no finding."""
+    ruff = Path(sys.executable).with_name("ruff")
+    assert ruff.is_file(), f"{ruff} is missing: scripts/test.sh installs scripts/test-requirements.txt"
+    done = on_rank0(lambda: subprocess.run([str(ruff), "check", "--no-cache", "app", "meshes"], cwd=ROOT,
+                                           capture_output=True, text=True, timeout=300))
+    assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
 
 
 def _copy_with(tmp: Path, path: str, line: str) -> Path:

@@ -24,7 +24,8 @@ from app.geometry.tube import EllipticTube, Tube
 from app.geometry.tube3d import EllipticTube3D, Tube3D
 from app.schema import ConfigError
 
-BUILTIN = (Bilayer(), Tube(), EllipticTube(), Plate(), Tube3D(), EllipticTube3D(), UserMsh(), UserMsh3D())  # registration order = the order docs list them
+# registration order = the order docs list them
+BUILTIN = (Bilayer(), Tube(), EllipticTube(), Plate(), Tube3D(), EllipticTube3D(), UserMsh(), UserMsh3D())
 for _kind in BUILTIN:
     KINDS.register(_kind)
 DEFAULT_KIND = "bilayer"  # the paper's film on a substrate

@@ -76,7 +76,8 @@ def facet_nodes(domain) -> np.ndarray:
     domain.topology.create_connectivity(tdim - 1, 0)
     domain.topology.create_connectivity(tdim, 0)
     f2v = np.asarray(domain.topology.connectivity(tdim - 1, 0).array, dtype=np.int64).reshape(-1, 2 ** (tdim - 1))
-    c2v = np.asarray(domain.topology.connectivity(tdim, 0).array, dtype=np.int64).reshape(fem_utils.num_local_cells(domain), -1)
+    c2v = np.asarray(domain.topology.connectivity(tdim, 0).array, dtype=np.int64)
+    c2v = c2v.reshape(fem_utils.num_local_cells(domain), -1)
     v2g = np.full(domain.topology.index_map(0).size_local + domain.topology.index_map(0).num_ghosts, -1, np.int64)
     v2g[c2v] = fem_utils.cell_geometry_nodes(domain)[:, : c2v.shape[1]]  # a first-order cell's nodes are its vertices
     return v2g[f2v]

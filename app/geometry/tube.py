@@ -61,7 +61,8 @@ class Tube(GeometryKind):
         a, b = semi_axes(R - H - w, self.aspect_ratio(geo))
         m = max(2, round(ellipse_perimeter(a, b) / mesh["element_size"] / 4))  # as meshes.tube.add_section
         first = film_interface_height(w, mesh["film_layers"], mesh["film_grading"])
-        ny = mesh["film_layers"] + substrate_layer_count(H, first * mesh["substrate_grading"], mesh["substrate_grading"])
+        grading = mesh["substrate_grading"]
+        ny = mesh["film_layers"] + substrate_layer_count(H, first * grading, grading)
         return 4 * m, ny
 
     def estimate(self, g: GeometryInput) -> dict:

@@ -126,7 +126,7 @@ class DofLayout:
             uk, x, qk = stored
             scale = max(1.0, float(np.abs(x).max(initial=0.0)))
             self._where = []
-            for r, (ku, xu, kq) in enumerate(parts):
+            for ku, xu, kq in parts:
                 pu = np.minimum(np.searchsorted(uk, ku), max(uk.size - 1, 0))
                 pq = np.minimum(np.searchsorted(qk, kq), max(qk.size - 1, 0))
                 if uk.size == 0 or (uk[pu] != ku).any() or qk.size == 0 or (qk[pq] != kq).any():

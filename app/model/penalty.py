@@ -38,7 +38,8 @@ class PenaltyContact(GatheredSurface):
 
     def objective(self, owned_values) -> float:
         """The term's energy, or inf outside its domain: where a node has tunnelled through the surface
-        beyond the pairing's reach (:meth:`~app.model.polyline_penalty.PolylinePenalty.tunnelled_crossings`). The minimizer's line search
+        beyond the pairing's reach (:meth:`~app.model.polyline_penalty.PolylinePenalty.tunnelled_crossings`).
+        The minimizer's line search
         then shortens the step; the penalty alone, which falls to zero beyond the reach, would let a step
         tunnel a node through the surface and call it a decrease of the energy."""
         return self.term.objective(self.displacement(owned_values))

@@ -247,15 +247,15 @@ class PolylinePenalty:
         mid = a + 0.5 * t
         radius = float(np.max(0.5 * L + self.reach * self.seg_length)) * (1.0 + 1e-9)
         near = cKDTree(mid).query_ball_point(xp, radius)
-        I = np.repeat(np.arange(len(xp)), [len(c) for c in near])
-        Jc = np.fromiter((j for c in near for j in c), np.int64, count=len(I))
-        keep = self.partners[I, Jc]
-        I, Jc = I[keep], Jc[keep]
-        rel = xp[I] - a[Jc]
+        Ip = np.repeat(np.arange(len(xp)), [len(c) for c in near])
+        Jc = np.fromiter((j for c in near for j in c), np.int64, count=len(Ip))
+        keep = self.partners[Ip, Jc]
+        Ip, Jc = Ip[keep], Jc[keep]
+        rel = xp[Ip] - a[Jc]
         s = np.full(self.partners.shape, np.nan)
         g = np.full(self.partners.shape, np.nan)
-        s[I, Jc] = np.einsum("ij,ij->i", rel, t[Jc]) / L[Jc] ** 2
-        g[I, Jc] = np.einsum("ij,ij->i", rel, n[Jc])
+        s[Ip, Jc] = np.einsum("ij,ij->i", rel, t[Jc]) / L[Jc] ** 2
+        g[Ip, Jc] = np.einsum("ij,ij->i", rel, n[Jc])
         return s, g
 
     def energy(self, u: np.ndarray) -> float:

@@ -171,7 +171,8 @@ class CylinderSurface(SurfaceShape):
         seg = np.linalg.norm(np.roll(section, -1, axis=0) - section, axis=1)  # the closing chord included
         phase = theta[first[0]] + 2 * np.pi * np.concatenate([[0.0], np.cumsum(seg[:-1])]) / seg.sum()
         scale = np.full(len(coords), seg.sum() / (2 * np.pi))
-        return np.column_stack([phase[inverse.ravel()], coords[:, 2]]), np.sum(disp[:, :2] * rel, axis=1) / radius, scale
+        normal = np.sum(disp[:, :2] * rel, axis=1) / radius
+        return np.column_stack([phase[inverse.ravel()], coords[:, 2]]), normal, scale
 
     def order(self, coords: np.ndarray) -> np.ndarray:
         position, _, _ = self._project(coords, np.zeros_like(coords))

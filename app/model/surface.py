@@ -65,7 +65,8 @@ def surface_profile(problem, array: np.ndarray, outward: bool = True):
     (position, profile, weights, closed). Open surfaces (bilayer): position along the surface [mm], the
     normal displacement minus its least-squares mean and linear trend (a uniform swelling and a tilt),
     signed so that the mean displacement is >= 0 (outwards for a swelling body; with ``outward = False`` the
-    sign is that of a fixed normal, the tangent turned anticlockwise, for a mode whose mean means nothing). Closed surfaces (tubes):
+    sign is that of a fixed normal, the tangent turned anticlockwise, for a mode whose mean means nothing).
+    Closed surfaces (tubes):
     phase 0..2 pi, the radial displacement minus its weighted mean and its n = 1 Fourier part (a uniform
     swelling and a rigid translation), with the arc-length quadrature weights."""
     coords, disp = boundary_displacement(problem, array, problem.geo.facets_with_role("permeable"))

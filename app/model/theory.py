@@ -27,7 +27,6 @@ from scipy.optimize import brentq
 from app.model.hydrogel import Hydrogel
 from app.model.material import chemical_potential
 
-
 HZS_CREASE_STRAIN = 0.354  # Hong, Zhao & Suo 2009: the crease onset of a neo-Hookean half-space in plane strain
 CREASE_STRETCH_RATIO = 1.0 / (1.0 - HZS_CREASE_STRAIN) ** 2  # the same as a ratio of principal stretches: 2.396
 

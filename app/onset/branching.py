@@ -103,7 +103,7 @@ class BranchSwitcher:
         inflow = p.fluid_volume() - before
         st.inflow += inflow
         st.follow_minimizers()
-        relaxed = st.relax()  # without diffusion: settle onto the branch at the onset's load
+        st.relax()  # without diffusion: settle onto the branch at the onset's load
         # the count of the mode added (the first eigenpair's), not the crossing's N_c (the minimum of the band)
         count = crossing.first_mode_wrinkle_count
         rec = Switch(st.t, p.growth(), count, abs(self.imperfection) * self.length, with_flux, inflow)

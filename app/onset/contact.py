@@ -5,7 +5,8 @@ wrinkles fold into a crease, the permeable surface passes through itself and the
 nothing. With it (a penalty, :mod:`app.model.penalty`, or a barrier, :mod:`app.model.barrier`) the surface
 holds, and a penalty that cannot hold a state is an overrun. In either case a cell with det F <= 0 cannot be
 represented (the energy's ln J is undefined there). A run that follows the branch checks every accepted
-state and ends with status "contact" (a crossing, or the penalty overrun) or "inverted", saying when and where, instead of a Newton
+state and ends with status "contact" (a crossing, or the penalty overrun) or "inverted", saying when and where,
+instead of a Newton
 failure (docs/postbuckling.md, docs/creases.md).
 """
 

@@ -93,7 +93,8 @@ class SteppedProblem:
     set_time: Callable[[float, float], None]  # (t, tau): the loading at t for a step of size tau
     influx: Callable[[], float]  # fluid volume entering through the permeable surface in the current step
     observables: Callable[[float], dict]  # the converged state's history columns at time t (StepRecord.values)
-    accept: Callable[[], None]  # the converged step (in ``w``) becomes the state (the model's update: u_n = u, Q_n += dQ)
+    # the converged step (in ``w``) becomes the state (the model's update: u_n = u, Q_n += dQ)
+    accept: Callable[[], None]
     extra: Any = None  # an energy term that is not a form (self-contact; NewtonSolver's ``extra``), or None
     uptake: str | None = None  # the observable whose relative rate time.stop_at_equilibrium tests (None: never)
 

@@ -231,7 +231,8 @@ class TimeStepper:
             if not res.converged:
                 self.failed_solves += 1
                 failures += 1
-                limit = limits.failed_attempt(self.system.w.x.array, self.t + dt, self.t) if limits is not None else None
+                limit = (limits.failed_attempt(self.system.w.x.array, self.t + dt, self.t) if limits is not None
+                         else None)
                 if res.reason == last_reason and not diagnosed:
                     diagnosed = True
                     self._diagnose(dt, res.reason, failures)
@@ -239,7 +240,8 @@ class TimeStepper:
                 new_dt = control.cut_back(dt)
                 self.log(f"  Newton did not converge (reason {res.reason}) at t = {self.t + dt:.6g} s, "
                          f"dt = {dt:.3g} s: cutting back to {new_dt:.3g} s"
-                         + (f" (its last iterate: {limit.status} near (" + ", ".join(f"{v:.4g}" for v in limit.where) + ") mm)"
+                         + (f" (its last iterate: {limit.status} near ("
+                            + ", ".join(f"{v:.4g}" for v in limit.where) + ") mm)"
                             if limit is not None else ""))
                 if new_dt < control.dt_min:
                     if limits is not None:

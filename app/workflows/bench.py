@@ -13,11 +13,12 @@ that (without factor reuse Newton factorizes once per iteration).
 ``R_performed`` divides by the factorizations actually made instead: Newton's plus every exact stability
 test (larger than R where steps are screened on the Newton factor, which factorizes nothing; smaller
 with the default drained criterion, tested exactly every step and in the bisection, although its matrix
-has only the displacement dofs and factorizes faster than K). ``R_accepted_steps`` counts only the accepted steps' Newton
-iterations in the bound (history.csv), leaving rejected and bisection solves in the time only.
+has only the displacement dofs and factorizes faster than K). ``R_accepted_steps`` counts only the accepted steps'
+Newton iterations in the bound (history.csv), leaving rejected and bisection solves in the time only.
 
 ``--baseline`` runs every size twice in the same invocation, first with :data:`BASELINE` (the settings before
-factor reuse and the predictive step controller) and then with the current defaults, and reports the ratios of the two: speedups measured side
+factor reuse and the predictive step controller) and then with the current defaults, and reports the ratios of the
+two: speedups measured side
 by side, on the same machine minutes apart, not absolute times from different days. With ``--ranks`` the
 two variants are separate launches (each its own processes, so each peak memory is its own); in one
 process the peak is reset before every run (Linux), but memory the allocator kept from an earlier run may

@@ -4,7 +4,8 @@ The trial crease (:class:`app.onset.creases.CreaseTrial`) is computed on meshes 
 the crease's tip: three of them, with ``stability.crease_resolution`` / 4, / 2 and x 1 elements along the
 crease. On each, the load where the creased state's energy falls below the flat state's is bracketed and
 then found by regula falsi (:func:`app.onset.maxwell.level_onset`); the three onsets give the answer by
-Richardson extrapolation and its error bar. A growing crease (``stability.crease_growth``) that outgrows the fine zone on the coarsest level makes that
+Richardson extrapolation and its error bar. A growing crease (``stability.crease_growth``) that outgrows the fine
+zone on the coarsest level makes that
 level a pilot: the three levels are then meshed with a band of fine elements along the symmetry line, and
 the first of them marches from the pilot's onset. The coarsest level (the pilot, if there is one) scans the
 whole run (time 0 to time.end, or to the end of a swelling ramp, after which the bath and so its

@@ -1,7 +1,8 @@
 """What a step costs on each part of a run (docs/performance.md): the wall time of every accepted step (its
 attempts, cut-backs and solves) and of the stability test of its state that follows (not the location of a
 crossing: bisection, the switch), sorted into the steps before a branch switch and those on a followed branch,
-and on the branch into the steps whose state touches itself and those that touch nowhere. summary.json's ``step_cost`` block: the count, mean and median of
+and on the branch into the steps whose state touches itself and those that touch nowhere. summary.json's
+``step_cost`` block: the count, mean and median of
 each part with their Newton iterations, and the ratios a user compares (a branch step against a step before
 the onset; a step in contact against a branch step without contact). The first SETTLING steps after each
 switch leave a saddle and are reported apart.
