@@ -34,7 +34,14 @@ HELD_COMPONENTS = {"fixed": (0, 1, 2), "roller_x": (0,), "roller_y": (1,), "roll
 @dataclass(frozen=True)
 class Drive:
     """A boundary a displacement loading may move: facet group, displacement component, and the length
-    that turns an applied strain into a displacement."""
+    that turns an applied strain into a displacement.
+
+    Attributes:
+        group: the facet group moved (a key of :attr:`GeometrySetup.boundaries`).
+        component: the displacement component it moves (0: x, 1: y, 2: z).
+        length: the length [mm] an applied strain is a fraction of: the compression loading moves the group
+            by -strain x length.
+    """
 
     group: str
     component: int
@@ -46,7 +53,19 @@ class CrossSection:
     """A kind's exact 1D counterpart, as geometry: layers along one coordinate (each (material, start, end),
     in increasing coordinate), where fluid enters and what is held. :func:`app.factory.section` adds the
     materials and the loading (:class:`app.reduced.section.Section`, whose docstring says what each shape
-    means)."""
+    means).
+
+    Attributes:
+        shape: ``"planar"`` (the coordinate Y from the base) or ``"axisymmetric"`` (r from the passage).
+        layers: (material name, start, end) of each layer [mm], in increasing coordinate.
+        surface: the coordinate of the permeable surface [mm].
+        base: the coordinate of the held boundary [mm].
+        length: planar: the length L along the surface (wavenumber k = n pi / L); None otherwise.
+        width: a 3D plate's width W (its modes: a lattice of |k|); None otherwise.
+        axial: a 3D tube: mode n is its axially uniform mode, wave vector (n, 0).
+        clamped: planar: the base holds both displacement components.
+        drive: the boundary a displacement loading moves (compression); None: none.
+    """
 
     shape: str  # "planar" (Y from the base) or "axisymmetric" (r from the passage)
     layers: tuple[tuple[str, float, float], ...]
@@ -69,6 +88,28 @@ def planar_cross_section(geo: dict, width: float | None = None, drive: Drive | N
 
 @dataclass
 class GeometrySetup:
+    """What a kind's builder (:meth:`GeometryKind.build`, :meth:`GeometryKind.crease_setup`) hands to the
+    problem: the tagged mesh and what its groups mean.
+
+    Attributes:
+        tm: the mesh with its named cell and facet groups (:class:`app.geometry.tagged.TaggedMesh`).
+        layers: cell group -> the name of the material its cells are made of (``"film"``, ``"substrate"`` or a
+            [material.layers.NAME]).
+        boundaries: facet group -> boundary role (:data:`BOUNDARY_ROLES`; the module docstring says what each
+            role means).
+        growth: the growth measure the run reports (:data:`app.model.growth.GROWTH`): ``mean_normal``,
+            ``mean_radial`` or ``vertex``.
+        growth_point: ``growth = "vertex"``: the surface point whose inward displacement is measured [mm] (a
+            mesh node).
+        growth_direction: the inward unit vector at ``growth_point``.
+        wrinkles: the surface shape that counts the wrinkles (:data:`app.model.shapes.SHAPES`): ``along`` an
+            open surface or ``around`` a closed one in 2D, ``plane`` or ``cylinder`` in 3D.
+        plot_band: a film on a substrate: the depth under the surface [mm] the mode plot shows; None: the
+            whole body.
+        drive: the boundary a displacement loading moves; None: none.
+        info: anything else the kind keeps with the setup.
+    """
+
     tm: object  # app.geometry.tagged.TaggedMesh
     layers: dict[str, str]  # cell group -> material name
     boundaries: dict[str, str]  # facet group -> role
@@ -81,11 +122,28 @@ class GeometrySetup:
     info: dict = field(default_factory=dict)
 
     def facets_with_role(self, *roles: str) -> list[str]:
+        """The facet groups with any of the given roles.
+
+        Args:
+            *roles: boundary roles (:data:`BOUNDARY_ROLES`), e.g. ``"permeable"``.
+
+        Returns:
+            The names of the facet groups whose role is one of ``roles``, in the order of :attr:`boundaries`
+            (empty if none).
+        """
         return [name for name, role in self.boundaries.items() if role in roles]
 
     def material_under(self, role: str, comm) -> str:
         """The material of most cells next to the facets of ``role``: the surface chemical potential ramp
-        starts at its mu0. Without such cells: "film", or (no layer called so) the first material by name."""
+        starts at its mu0. Without such cells: "film", or (no layer called so) the first material by name.
+
+        Args:
+            role: a boundary role (:data:`BOUNDARY_ROLES`), e.g. ``"permeable"``.
+            comm: the mesh's communicator; collective: the cells of every rank count.
+
+        Returns:
+            The material's name (a value of :attr:`layers`), the same on every rank.
+        """
         from app import fem_utils  # dolfinx once a mesh exists: config and validation stay light without it
 
         domain = self.tm.mesh
@@ -161,7 +219,15 @@ def size_line(est: dict) -> str:
 class GeometryInput:
     """What a geometry kind reads of a resolved config, built at the top (:func:`app.config.geometry_input`): the
     kind's name, its [geometry] table (the kind's own keys, resolved), the [mesh] table, the loading's kind and
-    the names of the config's [material.layers]. A kind never sees the whole config."""
+    the names of the config's [material.layers]. A kind never sees the whole config.
+
+    Attributes:
+        kind: ``geometry.kind``, the name of the kind.
+        geometry: the [geometry] table: the kind's own keys, resolved (its defaults applied).
+        mesh: the [mesh] table (element size, film layers, gradings, refinements, ...).
+        loading: ``loading.kind``.
+        layers: the names NAME of the config's [material.layers.NAME] tables.
+    """
 
     kind: str
     geometry: Mapping[str, Any]
@@ -195,24 +261,79 @@ class GeometryKind:
     uniform_refinement: ClassVar[bool] = False
 
     def defaults(self) -> dict:
+        """The kind's geometry defaults, which the config applies to every geometry.* key left unset.
+
+        Returns:
+            Each of :attr:`keys` with its default value.
+        """
         return {name: k.default for name, k in self.keys.items()}
 
     def validate(self, g: GeometryInput) -> None:
-        """Checks that relate this kind's keys to each other and to the mesh keys (ConfigError)."""
+        """Checks that relate this kind's keys to each other and to the mesh keys (ConfigError).
+
+        Called by the config's validation, after every key has been checked on its own; the base checks
+        nothing.
+
+        Args:
+            g: what the kind reads of the config.
+
+        Raises:
+            ConfigError: keys that do not fit together, naming the key to change.
+        """
 
     def check_input(self, g: GeometryInput, comm) -> None:
         """Input errors only the kind's files can show, without building a mesh (ConfigError on every
-        rank). Commands call this before they create any result."""
+        rank). Commands call this before they create any result.
+
+        The base checks nothing (a kind that reads no file of the user's has nothing to check).
+
+        Args:
+            g: what the kind reads of the config.
+            comm: the communicator; call on every rank.
+
+        Raises:
+            ConfigError: a file missing, unreadable or without what the config names, on every rank.
+        """
 
     def build(self, g: GeometryInput, comm, msh_path: str | None = None) -> GeometrySetup:
-        """The tagged mesh and what it means; with ``msh_path`` also write the mesh as .msh."""
+        """The tagged mesh and what it means; with ``msh_path`` also write the mesh as .msh.
+
+        Every kind implements it (the base raises NotImplementedError).
+
+        Args:
+            g: what the kind reads of the config.
+            comm: the communicator the mesh is distributed over; call on every rank.
+            msh_path: where to write the gmsh mesh (``hydrobuckle mesh``); None: nothing is written.
+
+        Returns:
+            The :class:`GeometrySetup`: the mesh, its layers' materials, its boundary roles, and the growth
+            and wrinkle measures.
+
+        Raises:
+            ConfigError: input the mesh builder cannot take, naming the key.
+        """
         raise NotImplementedError
 
     def refined(self, g: GeometryInput, exponent: int, factor: float) -> tuple[float, dict]:
         """The mesh of a refinement study's level: refined ``exponent`` times by ``factor`` (coarsened if
         negative). Returns (the level's parameter, the config changes); ConfigError if there is no such
         level. The built-in kinds divide mesh.element_size by the factor and multiply mesh.film_layers by
-        it, so element shapes are kept while h shrinks."""
+        it, so element shapes are kept while h shrinks.
+
+        Args:
+            g: what the kind reads of the base level's config.
+            exponent: the level: refined this many times, or coarsened ``-exponent`` times if negative
+                (0: the base level).
+            factor: the mesh ratio between neighbouring levels (2 in the convergence study).
+
+        Returns:
+            (the level's parameter, the changes of dotted config keys that give its mesh); the built-in
+            kinds' parameter is the level's mesh.element_size.
+
+        Raises:
+            ConfigError: no such level (e.g. mesh.film_layers cannot be coarsened that often by ``factor``),
+                naming the key.
+        """
         mesh = g.mesh
         value = mesh["element_size"] / factor ** exponent
         layers = mesh["film_layers"] * factor ** exponent
@@ -230,7 +351,17 @@ class GeometryKind:
 
     def cross_section(self, geo: dict) -> CrossSection:
         """The kind's exact 1D counterpart from its resolved [geometry] table (kinds with
-        :attr:`reduced_loadings`)."""
+        :attr:`reduced_loadings`).
+
+        Only called for a config the reduction covers; the base (a kind without a 1D counterpart) raises
+        NotImplementedError.
+
+        Args:
+            geo: the resolved [geometry] table.
+
+        Returns:
+            The :class:`CrossSection`: its layers, permeable surface, held base and drive.
+        """
         raise NotImplementedError
 
     #: a trial crease (stability.creases, app.onset.creases) can be placed: crease_setup and crease_line
@@ -238,16 +369,49 @@ class GeometryKind:
 
     def crease_setup(self, g: GeometryInput, comm, tip_size: float, tip_radius: float,
                      tip_depth: float = 0.0) -> GeometrySetup:
-        """The geometry meshed for a trial crease on a symmetry line of the body (:attr:`creases`)."""
+        """The geometry meshed for a trial crease on a symmetry line of the body (:attr:`creases`).
+
+        Kinds with :attr:`creases` implement it; the base raises NotImplementedError.
+
+        Args:
+            g: what the kind reads of the config.
+            comm: the communicator the mesh is distributed over; call on every rank.
+            tip_size: the element size [mm] at the crease's tip.
+            tip_radius: the radius [mm] of the fine zone around the tip.
+            tip_depth: > 0: a growing crease, fine within ``tip_radius`` of the symmetry line from the surface
+                down to this depth [mm]; 0: fine around the tip alone.
+
+        Returns:
+            The :class:`GeometrySetup` of the meshed body, the symmetry line (:meth:`crease_line`) held in x.
+        """
         raise NotImplementedError
 
     def crease_line(self, g: GeometryInput) -> float:
-        """x of the symmetry line (held in x) the trial crease sits on."""
+        """x of the symmetry line (held in x) the trial crease sits on.
+
+        Kinds with :attr:`creases` implement it; the base raises NotImplementedError.
+
+        Args:
+            g: what the kind reads of the config.
+
+        Returns:
+            The line's x coordinate [mm].
+        """
         raise NotImplementedError
 
     def estimate(self, g: GeometryInput) -> dict | None:
         """The mesh size from the keys alone, without meshing (:func:`structured_size`); None if unknown
-        (a user's file)."""
+        (a user's file).
+
+        The pre-flight checks compare it with :data:`MAX_CELLS`; the base knows no size.
+
+        Args:
+            g: what the kind reads of the config.
+
+        Returns:
+            ``cells``, ``dofs``, ``memory_mb`` (a serial run) and ``detail`` (the elements along and across,
+            for the message), as :func:`structured_size` gives them; or None.
+        """
         return None
 
 

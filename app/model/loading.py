@@ -22,7 +22,15 @@ from app.schema import Key, gt, in_closed, in_open, key
 
 @dataclass(frozen=True)
 class BoundaryConditions:
-    """The conditions of a loading on named facet groups."""
+    """The conditions of a loading on named facet groups.
+
+    Attributes:
+        held: per displacement component x, y, z: the facet groups where it is zero (a 2D mesh has no z).
+        driven: the facet group, and its component, that follows :meth:`Loading.applied_displacement`; None:
+            none.
+        flux_open: the facet groups free of the no-flux condition (every other exterior facet has zero normal
+            flux); None: diffusion off, every flux dof zero (s stays s0).
+    """
 
     held: tuple[tuple[str, ...], ...]  # per displacement component x, y, z: facet groups where it is zero (a 2D
     # mesh has no z)
@@ -32,7 +40,11 @@ class BoundaryConditions:
 
 
 class Loading:
-    """One value of ``loading.kind``; an instance is the loading of one run."""
+    """One value of ``loading.kind``; an instance is the loading of one run.
+
+    Subclass it (its ``name`` and :meth:`mu_bar` at least), then register the class in
+    :data:`LOADINGS`. Times are in seconds from the start of the run.
+    """
 
     name: ClassVar[str] = ""
     keys: ClassVar[dict[str, Key]] = {}  # loading.* keys it reads
@@ -48,37 +60,91 @@ class Loading:
 
     def __init__(self, params: dict, *, mu_start: float, end_time: float, drive: Drive | None = None):
         """``params``: this loading's keys; ``mu_start``: mu0 of the material under the permeable surface
-        (the surface starts in equilibrium with it); ``drive``: the geometry's movable boundary."""
+        (the surface starts in equilibrium with it); ``drive``: the geometry's movable boundary.
+
+        Args:
+            params: the [loading] table; the values of this loading's :attr:`keys` are kept as ``self.params``.
+            mu_start: mu0 of the material under the permeable surface [MPa].
+            end_time: the run's end, ``time.end`` [s].
+            drive: the geometry's movable boundary (``GeometrySetup.drive``); None: the geometry has none.
+
+        Raises:
+            KeyError: ``params`` lacks one of :attr:`keys` (a resolved config has them all).
+        """
         self.params = {k: params[k] for k in self.keys}
         self.mu_start, self.end_time, self.drive = mu_start, end_time, drive
 
     @property
     def kind(self) -> str:
+        """The loading's ``loading.kind``: its :attr:`name`."""
         return self.name
 
     def mu_bar(self, t: float) -> float:
-        """Chemical potential imposed on the permeable surface [MPa]."""
+        """Chemical potential imposed on the permeable surface [MPa].
+
+        Every loading implements it (the base raises NotImplementedError). Where :attr:`surface_term` is
+        False it is recorded in the history only.
+
+        Args:
+            t: the time [s].
+
+        Returns:
+            mu_bar(t) [MPa].
+        """
         raise NotImplementedError
 
     def applied_strain(self, t: float) -> float:
-        """What the history records as applied_strain."""
+        """What the history records as applied_strain.
+
+        Args:
+            t: the time [s].
+
+        Returns:
+            The applied strain at ``t`` (dimensionless); 0 for a loading that applies none (the base).
+        """
         return 0.0
 
     def applied_displacement(self, t: float) -> float:
-        """Displacement of the driven boundary's component [mm]."""
+        """Displacement of the driven boundary's component [mm].
+
+        Only read when :meth:`conditions` names a driven boundary.
+
+        Args:
+            t: the time [s].
+
+        Returns:
+            The displacement at ``t`` [mm]; 0 in the base.
+        """
         return 0.0
 
     def kinks(self) -> list[float]:
-        """Times where the load rate jumps: steps must not cross them."""
+        """Times where the load rate jumps: steps must not cross them.
+
+        Returns:
+            The times [s]; none in the base.
+        """
         return []
 
     def load_end(self) -> float:
-        """The time after which the load no longer changes (what a scan over equilibrium states covers)."""
+        """The time after which the load no longer changes (what a scan over equilibrium states covers).
+
+        Returns:
+            That time [s]; the base: the run's end (``time.end``).
+        """
         return self.end_time
 
     def conditions(self, boundaries: dict[str, str]) -> BoundaryConditions:
         """Dirichlet and no-flux conditions for facet groups with roles (``GeometrySetup.boundaries``):
-        every role holds its components (``HELD_COMPONENTS``), fluid passes the permeable ones only."""
+        every role holds its components (``HELD_COMPONENTS``), fluid passes the permeable ones only.
+
+        That is the base's rule; a loading that moves a boundary or stops the fluid overrides it.
+
+        Args:
+            boundaries: facet group -> boundary role.
+
+        Returns:
+            The :class:`BoundaryConditions`; the base's have no driven boundary.
+        """
         return BoundaryConditions(_held(boundaries), None, _with_role(boundaries, "permeable"))
 
 

@@ -50,24 +50,76 @@ class MaterialLaw:
 
     def free_energy(self, F, s, p):
         """psi(F, s) as (bulk, constraint): psi = bulk + constraint, the constraint part (a penalty on a
-        volumetric constraint) integrated with the coupling quadrature (one point per cell)."""
+        volumetric constraint) integrated with the coupling quadrature (one point per cell).
+
+        Every law implements it (the base raises NotImplementedError). Written in UFL: mu and P are its
+        derivatives (``ufl.diff``), for the forms and for floats alike.
+
+        Args:
+            F: the deformation gradient (UFL): 2x2 in plane strain (the out-of-plane stretch is 1) or 3x3.
+            s: the fluid content (UFL scalar).
+            p: the parameters (:attr:`params`) as attributes: floats (a :class:`Material`) or UFL coefficients
+                (per-cell fields, constants).
+
+        Returns:
+            (bulk, constraint): the two UFL parts of the free energy per unit preswollen reference volume.
+        """
         raise NotImplementedError
 
     def dissipation(self, dQ, C_n, s_n, tau, p):
         """tau * phi of the step: the dissipation potential of the fluid-volume increment dQ = tau H,
-        with the previous step's right Cauchy-Green tensor C_n and fluid content s_n."""
+        with the previous step's right Cauchy-Green tensor C_n and fluid content s_n.
+
+        Every law implements it (the base raises NotImplementedError).
+
+        Args:
+            dQ: the step's fluid-volume increment (a UFL vector; H = dQ / tau is the flux).
+            C_n: the previous step's right Cauchy-Green tensor (in plane strain its 2x2 in-plane part).
+            s_n: the previous step's fluid content.
+            tau: the step size [s].
+            p: the parameters as attributes, as in :meth:`free_energy`.
+
+        Returns:
+            tau * phi (UFL scalar).
+        """
         raise NotImplementedError
 
     def reference_fluid(self, p) -> float:
-        """s0: the fluid content at which F = 1 is stress-free (the layer's reference state)."""
+        """s0: the fluid content at which F = 1 is stress-free (the layer's reference state).
+
+        Every law implements it (the base raises NotImplementedError).
+
+        Args:
+            p: a :class:`Material` of this law (its parameters as float attributes).
+
+        Returns:
+            s0 (float).
+        """
         raise NotImplementedError
 
     def material(self, values: dict) -> Material:
-        """The per-layer record of parameter values (floats)."""
+        """The per-layer record of parameter values (floats).
+
+        Args:
+            values: each declared parameter (:attr:`params`) with its value, e.g. a layer's parameters from the
+                config; other keys are ignored.
+
+        Returns:
+            The :class:`Material` (of this law's :attr:`material_class`).
+
+        Raises:
+            KeyError: a declared parameter is missing from ``values``.
+        """
         return self.material_class.from_dict(values)
 
     @property
     def floats(self) -> _FloatEvaluator:
+        """The evaluator of this law's mu and P at float arguments, made on first use (it imports dolfinx
+        when it first evaluates).
+
+        Returns:
+            The law's one :class:`_FloatEvaluator`.
+        """
         if self._floats is None:
             self._floats = _FloatEvaluator(self)
         return self._floats
@@ -78,25 +130,50 @@ LAWS: Registry[MaterialLaw] = Registry("material law")
 
 @dataclass(frozen=True)
 class Material:
-    """One layer's parameter values under a law (its fields are the law's declared parameters)."""
+    """One layer's parameter values under a law (its fields are the law's declared parameters).
+
+    Each law makes its own subclass (:attr:`MaterialLaw.material_class`, named
+    :attr:`MaterialLaw.material_name`), a frozen dataclass with one float field per parameter; ``law`` is that
+    law.
+    """
 
     law: ClassVar[MaterialLaw]
 
     @classmethod
     def from_dict(cls, d: dict) -> Material:
+        """The record of a mapping of parameter values.
+
+        Args:
+            d: each of the law's declared parameters with its value (converted to float); other keys are
+                ignored.
+
+        Returns:
+            The record.
+
+        Raises:
+            KeyError: a declared parameter is missing from ``d``.
+        """
         return cls(**{k: float(d[k]) for k in cls.law.params})
 
     def as_dict(self) -> dict:
+        """The parameter values.
+
+        Returns:
+            Each declared parameter with its value (s0 and mu0 are not fields, so not included).
+        """
         return dataclasses.asdict(self)
 
     @property
     def s0(self) -> float:
-        """Fluid content of the stress-free reference state."""
+        """Fluid content of the stress-free reference state (the law's :meth:`MaterialLaw.reference_fluid`)."""
         return self.law.reference_fluid(self)
 
     @property
     def mu0(self) -> float:
-        """Chemical potential of the reference state: dpsi/ds at F = 1, s = s0."""
+        """Chemical potential of the reference state: dpsi/ds at F = 1, s = s0 [MPa].
+
+        Evaluated by the law's :attr:`MaterialLaw.floats` (the forms' own derivative; imports dolfinx).
+        """
         return chemical_potential(self, IDENTITY, self.s0)
 
 

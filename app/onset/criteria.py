@@ -37,25 +37,72 @@ class Criterion:
     surface: ClassVar[str] = "drained"
 
     def operator(self, problem, params: dict):
-        """The matrix whose inertia decides stability at the problem's converged state."""
+        """The matrix whose inertia decides stability at the problem's converged state.
+
+        Every criterion implements it (the base raises NotImplementedError).
+
+        Args:
+            problem: the run's :class:`app.model.problem.Problem`; its converged state is what the matrix reads.
+            params: the criterion's parameters: ``stability.<key>`` of each of its :attr:`keys`.
+
+        Returns:
+            An operator of :mod:`app.solvers.stability` (``matrix``, ``embed``, ``eliminated_negatives``,
+            ``n_free``), e.g. a ``HessianOperator`` or a ``DrainedOperator``.
+
+        Raises:
+            ValueError: the criterion cannot test this problem (the drained one on a body without a permeable
+                boundary).
+        """
         raise NotImplementedError
 
     def analyzer(self, problem, params: dict):
-        """The :class:`app.solvers.stability.StabilityAnalyzer` of :meth:`operator`."""
+        """The :class:`app.solvers.stability.StabilityAnalyzer` of :meth:`operator`.
+
+        Args:
+            problem: the run's :class:`app.model.problem.Problem`.
+            params: the criterion's parameters, as in :meth:`operator`.
+
+        Returns:
+            The analyzer (its ``inertia`` and eigenpairs); the caller frees it with ``destroy()``.
+
+        Raises:
+            ValueError: as :meth:`operator`.
+        """
         from app.solvers.stability import StabilityAnalyzer  # (lazy: the config schema reads this registry)
 
         return StabilityAnalyzer(self.operator(problem, params), problem.comm)
 
     def newton_may_screen(self, params: dict, dt: float) -> bool:
         """Whether the Newton factor of a step of size dt (K_dt) has at least this criterion's negative
-        eigenvalues, so that screening with it cannot miss a crossing (app.onset.screening)."""
+        eigenvalues, so that screening with it cannot miss a crossing (app.onset.screening).
+
+        Args:
+            params: the criterion's parameters, as in :meth:`operator`.
+            dt: the step size [s].
+
+        Returns:
+            True if the Newton factor may screen this criterion; the base: False (every step gets the exact test).
+        """
         return False
 
     def summary(self, params: dict) -> dict:
-        """summary.json's ``criterion`` entry: the name and the parameters."""
+        """summary.json's ``criterion`` entry: the name and the parameters.
+
+        Args:
+            params: the criterion's parameters, as in :meth:`operator`.
+
+        Returns:
+            ``{"name": ..., <key>: <value> for each of its keys}``.
+        """
         return {"name": self.name, **{k: params[k] for k in self.keys}}
 
     def surface_label(self) -> str:
+        """What the permeable surface's short-wave check (:attr:`surface`) reports as its criterion.
+
+        Returns:
+            The surface criterion's name if it is this criterion's own, else e.g.
+            ``"drained (the short-wave limit of rate)"``.
+        """
         return self.surface if self.surface == self.name else f"{self.surface} (the short-wave limit of {self.name})"
 
 
@@ -131,7 +178,11 @@ class LossOfStability:
     "rate" criterion at tau = dt (K as Newton sees it), then, where fluid can move in or out, with the drained
     criterion, stopping at the first with negative eigenvalues. Returns (what was tested, its negative
     eigenvalues) for each test run. ``remedy``: what a user can do once the state has lost stability, which the
-    stepper's :class:`~app.solvers.stepped_problem.LostStability` message ends with."""
+    stepper's :class:`~app.solvers.stepped_problem.LostStability` message ends with.
+
+    Args:
+        problem: the run's :class:`app.model.problem.Problem`, whose converged state is tested.
+    """
 
     remedy = ("enable the stability test (stability.enabled = true, stability.criterion = drained) to locate the "
               "onset and its mode, and stability.after_onset = \"branch\" to follow the buckled branch")
@@ -140,6 +191,16 @@ class LossOfStability:
         self.problem = problem
 
     def __call__(self, dt: float) -> list[tuple[str, int]]:
+        """Test the converged state (collective: call on every rank of the problem's communicator).
+
+        Args:
+            dt: the failing step's size [s]: the "rate" test's tau.
+
+        Returns:
+            (what was tested, its number of negative eigenvalues) for each test run, in order: the "rate"
+            test (``"K with tau = <dt> s"``), then, where fluid can move in or out and that K had no negative
+            eigenvalue, the drained one (``"the drained K"``).
+        """
         p, out = self.problem, []
         for name in ("rate", "drained") if p.diffusion else ("rate",):
             if name == "drained" and p.permeable_facets() == 0:
