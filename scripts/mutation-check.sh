@@ -135,7 +135,7 @@ MUTATIONS = [
      ["tests/test_contact.py::test_the_pairs_near_enough_to_touch_are_those_of_a_check_of_every_pair"]),
     ("contact pairs a node with what lies behind a corner", "app/model/polyline_penalty.py",
      r"self\.partners = ~own & \(facing >= -1e-9 \* L\[None, :\]\)", "self.partners = ~own",
-     ["tests/test_contact.py::test_a_slit_pressed_onto_itself_is_its_half_with_a_symmetry_line"]),
+     ["tests/test_contact.py::test_a_bodys_own_corner_is_not_contact"]),
     ("contact by the nodes alone (the segments' midpoints weightless)", "app/model/polyline_penalty.py",
      r"self\.weight = np\.concatenate\(\[count / 6\.0, np\.full\(m, 2\.0 / 3\.0\)\]\)",
      "self.weight = np.concatenate([count / 2.0, np.zeros(m)])",
