@@ -112,13 +112,14 @@ def test_the_crease_study_tabulates_both_verdicts_and_interpolates_the_crossover
     0.8 - 0.15 r cross at r = 3 and r = 1.4 exactly."""
     spec, cases = studies.study_cases("bilayer-creases", shared_tmp / "creases", "1,2,4", [])
     assert spec.creases and all(c.cfg["stability"]["creases"] for c in cases)
-    assert cases[1].cfg["material"]["film"]["modulus_ratio"] == 2.0
+    assert cases[1].cfg["material"]["film"]["modulus_ratio"] == 2
     for case in cases:
         r = case.value
         t = {"crease": 0.5 - 0.05 * r, "film": 0.59, "wrinkle": 0.8 - 0.15 * r}
         first = {"least_energy": "crease" if t["crease"] < t["wrinkle"] else "wrinkle",
                  "nucleation": "crease" if t["film"] < t["wrinkle"] else "wrinkle"}
-        summary = {"status": "buckled", "critical": {"time": t["wrinkle"], "applied_strain": 0.6 * t["wrinkle"]},
+        summary = {"status": "buckled", "critical": {"time": t["wrinkle"], "applied_strain": 0.6 * t["wrinkle"],
+                                                     "first_mode_wrinkle_count": 1.0, "growth_um": 400.0},
                    "reduced": {"time": t["wrinkle"] - 1e-3},
                    "creases": {"onset": {"time": t["crease"], "time_error": 1e-4, "applied_strain": 0.6 * t["crease"],
                                          "applied_strain_error": 6e-5},
@@ -143,7 +144,7 @@ def test_the_crease_study_tabulates_both_verdicts_and_interpolates_the_crossover
     capsys.readouterr()
     assert cli.main(["study", "--tables", str(shared_tmp / "tables-creases")]) == 0
     out = capsys.readouterr().out
-    assert "| - | 2.0 | buckled | 0.3000 | 0.5000 | 0.4990 | 0.2400 | 0.0001 | 0.100 | 0.4000 | 0.5900 | 0.0002 | " \
+    assert "| - | 2 | buckled | 0.3000 | 0.5000 | 0.4990 | 0.2400 | 0.0001 | 0.100 | 0.4000 | 0.5900 | 0.0002 | " \
         "crease | wrinkle | - |" in out
     assert "Crossover by least energy (" in out and "modulus_ratio = 3\n" in out and "modulus_ratio = 1.4\n" in out
 
