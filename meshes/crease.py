@@ -30,11 +30,8 @@ _OPTION = {"points": "PointsList" if _NEW_NAMES else "NodesList", "in": "InField
 
 def add_model(length: float, substrate_thickness: float, film_thickness: float, element_size: float,
               tip_size: float, tip_radius: float, film_size: float | None = None,
-              grading: float = GRADING, tip_depth: float = 0.0,
-              film_reach: float | None = None) -> tuple[dict, dict, dict]:
-    """Mesh the bilayer [0, L] x [0, H + w] in the current gmsh model: (cell groups, facet groups, info).
-    ``film_reach``: the film is no coarser than ``film_size`` within this distance of the left edge only, and
-    grows by ``grading`` beyond it (None: along the whole film)."""
+              grading: float = GRADING, tip_depth: float = 0.0) -> tuple[dict, dict, dict]:
+    """Mesh the bilayer [0, L] x [0, H + w] in the current gmsh model: (cell groups, facet groups, info)."""
     L, H, w = length, substrate_thickness, film_thickness
     geo = gmsh.model.geo
     p = [geo.addPoint(0, 0, 0), geo.addPoint(L, 0, 0), geo.addPoint(L, H, 0), geo.addPoint(0, H, 0),
@@ -71,23 +68,9 @@ def add_model(length: float, substrate_thickness: float, film_thickness: float, 
     sizes = [tip]
     if film_size is not None and film_size < element_size:
         box = field.add("Box")
-        inside = 0.0 if film_reach is not None else film_size  # with a reach: the film's grading decides inside
-        for name, value in (("VIn", inside), ("VOut", element_size), ("XMin", 0.0), ("XMax", L),
+        for name, value in (("VIn", film_size), ("VOut", element_size), ("XMin", 0.0), ("XMax", L),
                             ("YMin", H), ("YMax", H + w)):
             field.setNumber(box, name, value)
-        if film_reach is not None:  # film_size near the left edge, growing beyond film_reach; the box keeps it in the film
-            edge = field.add("Distance")
-            field.setNumbers(edge, _OPTION["curves"], [left_f])
-            field.setNumber(edge, _OPTION["sampling"], int(w / film_size) + 2)
-            near = field.add("Threshold")
-            field.setNumber(near, _OPTION["in"], edge)
-            field.setNumber(near, _OPTION["min"], film_size)
-            field.setNumber(near, _OPTION["max"], element_size)
-            field.setNumber(near, "DistMin", film_reach)
-            field.setNumber(near, "DistMax", film_reach + (element_size - film_size) / grading)
-            film_field = field.add("Max")
-            field.setNumbers(film_field, "FieldsList", [near, box])
-            box = film_field
         sizes.append(box)
     smallest = field.add("Min")
     field.setNumbers(smallest, "FieldsList", sizes)
@@ -107,5 +90,4 @@ def add_model(length: float, substrate_thickness: float, film_thickness: float, 
     types, tags, _ = gmsh.model.mesh.getElements(2)
     cells = {gmsh.model.mesh.getElementProperties(t)[0]: len(e) for t, e in zip(types, tags)}
     return dict(CELLS), dict(FACETS), {"tip_size": tip_size, "tip_radius": tip_radius, "tip_depth": tip_depth,
-                                       "element_size": element_size, "film_reach": film_reach,
                                        "cells_by_type": cells}

@@ -10,9 +10,6 @@ from app.geometry.base import (CrossSection, Drive, GeometryInput, GeometryKind,
                                 layer_keys, planar_cross_section, structured_size)
 from app.schema import ConfigError, gt, key
 
-CREASE_FAR_DIVISIONS = 8  # a trial crease's mesh is no coarser than the body's thickness / this, far from the crease
-CREASE_FILM_REACH = 10.0  # ... and its film keeps the run's layers within this many film thicknesses of the fine zone
-
 if TYPE_CHECKING:
     from app.geometry.tagged import TaggedMesh
 
@@ -69,13 +66,9 @@ class Bilayer(GeometryKind):
         from meshes import crease
 
         geo, mesh = g.geometry, g.mesh
-        w, thickness = geo["film_thickness"], geo["substrate_thickness"] + geo["film_thickness"]
-        # the trial's own far field: the run's element size resolves wrinkles, a crease's field decays over a few
-        # of its lengths (the grading decides there), so far away the body's thickness sets the size
-        far = max(mesh["element_size"], thickness / CREASE_FAR_DIVISIONS)
-        tm = mesh_from_builder(comm, "crease", crease.add_model, geo["length"], geo["substrate_thickness"], w, far,
-                               tip_size, tip_radius, w / mesh["film_layers"], tip_depth=tip_depth,
-                               film_reach=tip_radius + tip_depth + CREASE_FILM_REACH * w)
+        tm = mesh_from_builder(comm, "crease", crease.add_model, geo["length"], geo["substrate_thickness"],
+                               geo["film_thickness"], mesh["element_size"], tip_size, tip_radius,
+                               geo["film_thickness"] / mesh["film_layers"], tip_depth=tip_depth)
         return self._setup(tm, geo)
 
     def crease_line(self, g: GeometryInput) -> float:
