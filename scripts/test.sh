@@ -32,10 +32,15 @@ start=$(date +%s)
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 bash scripts/install.sh
-if ! "$here/.venv/bin/lint-imports" --version >/dev/null 2>&1; then
+# the suite's tools, installed again whenever scripts/test-requirements.txt changes (a venv kept between runs,
+# as the Debian 13 root's, then gets a tool added to the file)
+stamp="$here/.venv/.test-requirements.sha256"
+want=$(sha256sum scripts/test-requirements.txt | cut -d' ' -f1)
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   echo "test: installing scripts/test-requirements.txt into .venv"
   "$here/.venv/bin/python" -m pip install --quiet -r scripts/test-requirements.txt \
     || { echo "test: error: cannot install scripts/test-requirements.txt (PyPI unreachable?)" >&2; exit 1; }
+  echo "$want" > "$stamp"
 fi
 source scripts/mpi-env.sh
 # The suite's measured values were taken with OpenBLAS's AVX2 (Haswell) kernels, and two post-buckling cases are
