@@ -22,6 +22,7 @@ import pytest
 import ufl
 from conftest import EXE, child_env, child_jobs, long_physics, on_rank0, rank_local
 from dolfinx import fem
+from mpi4py import MPI
 from scipy.optimize import brentq
 
 from app import compat, config, factory, fem_utils
@@ -320,10 +321,11 @@ def test_the_crossover_bisection_finds_where_the_onset_meets_a_time(monkeypatch,
     assert abs(found["value"] - 2.5) <= found["error"] <= 1e-3 * 2.5
     assert reduction.crossover(cfg, key, 1.0, 2.0, 0.4, lambda msg: None)["value"] is None
     path = "configs/bilayer-creases.toml"
-    for bad, word in ((["5", "1", "0.4"], "LO < HI"), (["1", "5", "2"], "time.end"), (["1", "x", "0.4"], "numbers")):
+    rank0 = MPI.COMM_WORLD.rank == 0  # the one rank that prints
+    for bad, word in ((["5", "1", "0.4"], "LO < HI"), (["1", "x", "0.4"], "numbers"), (["1", "5", "2"], "time.end")):
         capsys.readouterr()
         assert cli.main(["reduced", path, "--crossover", key, *bad]) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and "--crossover" in err[0] and word in err[0]
+        assert not rank0 or (len(err) == 1 and "--crossover" in err[0] and word in err[0])
     assert cli.main(["reduced", path, "--crossover", "material.film.nope", "1", "5", "0.4"]) == 2
-    assert "material.film.nope" in capsys.readouterr().err
+    assert not rank0 or "material.film.nope" in capsys.readouterr().err
