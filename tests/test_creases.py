@@ -285,7 +285,7 @@ def test_a_bracket_that_ends_in_a_snap_bounds_the_onset_from_above():
              "snap": True}
     assert workflow._first(onset, {"time": 0.7282}) == "crease"
     assert workflow._first(onset, {"time": 0.5}) is None
-    line = workflow.describe({"onset": onset, "first": "crease"}, {"time": 0.7282})
+    line = workflow.describe({"onset": onset, "first": {"least_energy": "crease"}}, {"time": 0.7282})
     assert "from at most t = 0.6216" in line and "snaps" in line and "\n" not in line
 
 

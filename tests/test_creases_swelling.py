@@ -138,7 +138,8 @@ def test_which_comes_first_is_left_open_for_a_wrinkling_onset_away_from_equilibr
     critical = {"time": 0.5, "growth_mm": 0.0067}
     transient = {"growth_mm": 0.0067, "equilibrium_growth_mm": 0.8}
     assert workflow._first(onset, critical, transient) is None
-    line = workflow.describe({"onset": onset, "first": None, "wrinkling_equilibrium": transient}, critical)
+    line = workflow.describe({"onset": onset, "first": {"least_energy": None}, "wrinkling_equilibrium": transient},
+                             critical)
     assert "far from equilibrium with the bath" in line and "\n" not in line
     quasi_static = {"growth_mm": 0.0067, "equilibrium_growth_mm": 0.0067 * 1.01}
     assert workflow._first(onset, critical, quasi_static) == "wrinkle"  # 0.0067 < 0.5: by the growth
@@ -202,7 +203,7 @@ def test_a_transient_crease_is_compared_with_the_wrinkle_on_the_runs_own_time():
     assert workflow._first(onset, {"time": 1.0231, "growth_mm": 0.0132}) == "crease"
     # a wrinkle earlier in time comes first even where its growth would be larger
     assert workflow._first(onset, {"time": 0.98, "growth_mm": 0.0132}) == "wrinkle"
-    line = workflow.describe({"onset": onset, "first": "crease", "small_crease_limit": limit},
+    line = workflow.describe({"onset": onset, "first": {"least_energy": "crease"}, "small_crease_limit": limit},
                              {"time": 1.0231, "growth_mm": 0.0132})
     assert "transient" in line and "t = 0.97655 s" in line and "crease comes first" in line and "\n" not in line
     assert theory.CREASE_STRETCH_RATIO == pytest.approx(HZS_RATIO)

@@ -325,8 +325,7 @@ def _energy_verdict(block: dict, critical: dict | None) -> str:
 
 
 def _verdict(block: dict, criterion: str) -> str | None:
-    first = block.get("first")
-    return first.get(criterion) if isinstance(first, dict) else first
+    return (block.get("first") or {}).get(criterion)
 
 
 def _nucleation_verdict(block: dict, critical: dict | None) -> str:

@@ -309,7 +309,7 @@ def crossover_args(cfg: dict, raw: list[str]) -> tuple[str, float, float, float]
         raise config.ConfigError("--crossover", f"TIME must lie in (0, time.end = {cfg['time']['end']:g}] s "
                                  f"(got {target:g})")
     for v in (lo, hi):
-        config.validate(_with(cfg, key, v))
+        _with(cfg, key, v)  # a validated variant: a bad key or value is a ConfigError here
     return key, lo, hi, target
 
 
